@@ -1,0 +1,277 @@
+"""The balance QP of the whole-body controller (paper eqs. 5-10, corrected), built apart from solving.
+
+Frames and units: every vector is in the world frame (z up, m, m/s, rad/s, N, N·m) unless named
+otherwise; `rot` matrices map body-frame vectors to the world frame.
+
+Rigid-body model of the trunk (a single rigid body of mass m and body-frame inertia I_B about its
+COM), eq. 5 with the sign convention written once here::
+
+    qdd = M f + A f_a + B tau_a - g~          qdd = (COM linear acc (3), world angular acc (3))
+    M   = [ I3/m      ...  I3/m      ]        (6, 12); f = (f_FR, f_FL, f_RR, f_RL), the forces
+          [ I_w^-1 [r_1]x ... [r_4]x ]                 the ground exerts on the feet (N)
+    A   = [I3/m; 0],  B = [0; I_w^-1]         f_a, tau_a: force and torque about the COM applied by
+    g~  = (0, 0, g, 0, 0, 0), g = 9.81 > 0             the arm / payload (world frame)
+
+`r_i` is foot i minus the COM. The world inertia I_w = R I_B R^T is replaced by the yaw-only
+approximation I_w ~ R_z I_B R_z^T (Di Carlo et al. 2018), R_z the yaw part of R: exact for a level
+trunk, and the paper's `R_z^T I_B^-1` rows are this approximation written in the yaw frame. The
+gyroscopic term w x I w is neglected, as in the paper.
+
+Desired acceleration (eq. 9), gains diagonal per axis::
+
+    qdd_d = Kp * (q_d - q) + Kd * (qd_d - qd)
+    pose error = (com_pos_des - com_pos, log(R_des R^T))   rotation vector in the world frame (rad)
+    vel error  = (com_vel_des - com_vel, ang_vel_des - ang_vel)
+
+Cost (eq. 10) and its QP form (the QP objective is half the paper's cost, same minimiser)::
+
+    J(f) = || M f - b ||_Q^2 + || f ||_R^2,     b = qdd_d + g~ - A f_a - B tau_a
+    1/2 f' P f + q' f + const = J(f) / 2,       P = M' Q M + R,  q = -M' Q b,  const = b' Q b / 2
+
+Constraints (6 rows per foot, fixed size 24 for every env; `G f <= h`), for a stance foot::
+
+    f_min <= f_z <= f_max,   |f_x| <= mu f_z,   |f_y| <= mu f_z      (the friction pyramid)
+
+The paper's printed pyramid inequality is misprinted; this is the standard one. A swing foot gets
+the same rows with f_min = f_max = 0, which forces f_i = 0 (0 <= f_z <= 0, |f_x|, |f_y| <= 0), and
+its columns of M are zeroed so that a not-quite-zero swing force from an inexact solve cannot leak
+into the stance feet through the cost (the exact optimum is unchanged since f_i = 0 there).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jp
+
+from dpc_mjx.control import qp
+
+GRAVITY = 9.81  # m/s^2
+N_FEET = 4
+ROWS_PER_FOOT = 6
+N_VARS = 3 * N_FEET  # 12
+N_ROWS = ROWS_PER_FOOT * N_FEET  # 24
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class BalanceParams:
+    """Configuration of the balance QP. All fields are arrays (jit/vmap friendly).
+
+    Fields (shapes, units):
+      mass: ()            kg, whole robot including the arm.
+      inertia: (3, 3)     kg m^2, body-frame inertia about the COM.
+      mu: ()              friction coefficient of the pyramid.
+      f_min, f_max: ()    N, bounds of a stance foot's normal force.
+      kp: (6,)            1/s^2, pose gains (x, y, z, roll, pitch, yaw) of eq. 9.
+      kd: (6,)            1/s, velocity gains.
+      Q: (6,)             weights of the acceleration error (linear m/s^2, angular rad/s^2).
+      R: (12,)            weights of the forces, (m/s^2 / N)^2.
+    """
+
+    mass: jax.Array
+    inertia: jax.Array
+    mu: jax.Array
+    f_min: jax.Array
+    f_max: jax.Array
+    kp: jax.Array
+    kd: jax.Array
+    Q: jax.Array
+    R: jax.Array
+
+
+def default_params(
+    mass: float = 13.5,
+    inertia: tuple[float, float, float] = (0.07, 0.26, 0.24),
+    mu: float = 0.6,
+    f_min: float = 5.0,
+    f_max: float = 180.0,
+    kp: tuple[float, ...] = (50.0, 50.0, 100.0, 300.0, 300.0, 100.0),
+    kd: tuple[float, ...] = (10.0, 10.0, 20.0, 30.0, 30.0, 20.0),
+    Q: tuple[float, ...] = (1.0, 1.0, 1.0, 10.0, 10.0, 1.0),
+    R: float = 1e-4,
+) -> BalanceParams:
+    """Defaults for an A1 (12.5 kg) with a ~1 kg arm; `inertia` is a whole-body diagonal (kg m^2).
+
+    R = 1e-5 (m/s^2/N)^2 regularises the forces: it lowers the standing support force by the
+    factor 1 / (1 + R m^2 / 4) ~ 0.05 %, and with Q it makes P positive definite (cond ~ 1e7).
+    """
+    return BalanceParams(
+        mass=jp.asarray(mass, jp.float32),
+        inertia=jp.diag(jp.asarray(inertia, jp.float32)),
+        mu=jp.asarray(mu, jp.float32),
+        f_min=jp.asarray(f_min, jp.float32),
+        f_max=jp.asarray(f_max, jp.float32),
+        kp=jp.asarray(kp, jp.float32),
+        kd=jp.asarray(kd, jp.float32),
+        Q=jp.asarray(Q, jp.float32),
+        R=jp.broadcast_to(jp.asarray(R, jp.float32), (N_VARS,)),
+    )
+
+
+class BalanceQP(NamedTuple):
+    """The balance QP `min 1/2 f'Pf + q'f + const  s.t.  G f <= h` and the model behind it.
+
+    P: (12, 12), q: (12,), G: (24, 12), h: (24,), const: () (so the objective equals J/2).
+    M: (6, 12) and b: (6,) of the cost || M f - b ||_Q^2; qdd_des: (6,) the eq. 9 acceleration.
+    """
+
+    P: jax.Array
+    q: jax.Array
+    G: jax.Array
+    h: jax.Array
+    const: jax.Array
+    M: jax.Array
+    b: jax.Array
+    qdd_des: jax.Array
+
+
+def skew(v: jax.Array) -> jax.Array:
+    """[v]x (..., 3, 3) such that [v]x w = v x w, for v (..., 3)."""
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    o = jp.zeros_like(x)
+    return jp.stack(
+        [jp.stack([o, -z, y], -1), jp.stack([z, o, -x], -1), jp.stack([-y, x, o], -1)], -2
+    )
+
+
+def rotvec_from_matrix(rot: jax.Array) -> jax.Array:
+    """log(R) as a rotation vector (3,) (rad) of a rotation matrix (3, 3); finite for any input.
+
+    Via the quaternion (Shepperd's branch choice, the largest of w, x, y, z computed from the
+    diagonal) so that angles near 0 and near pi are both accurate: theta = 2 atan2(|v|, w), w >= 0.
+    """
+    rot = jp.nan_to_num(rot)
+    r = rot
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    # Four candidate (unnormalised) quaternions (w, x, y, z) * 4 * component; pick the stable one.
+    cand = jp.stack(
+        [
+            jp.stack([1 + tr, r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]),
+            jp.stack([r[2, 1] - r[1, 2], 1 + 2 * r[0, 0] - tr, r[0, 1] + r[1, 0], r[0, 2] + r[2, 0]]),
+            jp.stack([r[0, 2] - r[2, 0], r[0, 1] + r[1, 0], 1 + 2 * r[1, 1] - tr, r[1, 2] + r[2, 1]]),
+            jp.stack([r[1, 0] - r[0, 1], r[0, 2] + r[2, 0], r[1, 2] + r[2, 1], 1 + 2 * r[2, 2] - tr]),
+        ]
+    )
+    diag = jp.stack([tr, r[0, 0], r[1, 1], r[2, 2]])
+    quat = cand[jp.argmax(diag)]
+    quat = quat * jp.where(quat[0] < 0, -1.0, 1.0)  # w >= 0: the short way round
+    vnorm = jp.linalg.norm(quat[1:])
+    angle = 2.0 * jp.arctan2(vnorm, quat[0])
+    safe = jp.where(vnorm > 0, vnorm, 1.0)
+    return jp.where(vnorm > 0, quat[1:] * (angle / safe), jp.zeros(3, rot.dtype))
+
+
+def yaw_rotation(rot: jax.Array) -> jax.Array:
+    """R_z (3, 3): the rotation about world z by the yaw of `rot` (heading of the body x axis)."""
+    yaw = jp.arctan2(rot[1, 0], rot[0, 0])
+    c, s = jp.cos(yaw), jp.sin(yaw)
+    o, one = jp.zeros_like(c), jp.ones_like(c)
+    return jp.stack([jp.stack([c, -s, o]), jp.stack([s, c, o]), jp.stack([o, o, one])])
+
+
+def friction_constraints(
+    mu: jax.Array, f_min: jax.Array, f_max: jax.Array, contact: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """G (24, 12), h (24,) of the friction pyramids; a swing foot (contact False) gets f_i = 0.
+
+    Rows of foot i (variables f_i = (fx, fy, fz)):  fz <= fmax,  -fz <= -fmin,
+    fx - mu fz <= 0,  -fx - mu fz <= 0,  fy - mu fz <= 0,  -fy - mu fz <= 0.
+    """
+    one, zero = jp.ones_like(mu), jp.zeros_like(mu)
+    block = jp.stack(
+        [
+            jp.stack([zero, zero, one]),
+            jp.stack([zero, zero, -one]),
+            jp.stack([one, zero, -mu]),
+            jp.stack([-one, zero, -mu]),
+            jp.stack([zero, one, -mu]),
+            jp.stack([zero, -one, -mu]),
+        ]
+    )  # (6, 3)
+    G = jp.kron(jp.eye(N_FEET, dtype=block.dtype), block)  # (24, 12) block diagonal
+    c = contact.astype(block.dtype)  # (4,)
+    h_foot = jp.stack([f_max * c, -f_min * c, zero * c, zero * c, zero * c, zero * c], -1)
+    return G, h_foot.reshape(N_ROWS)
+
+
+def build_balance_qp(
+    params: BalanceParams,
+    com_pos: jax.Array,
+    com_vel: jax.Array,
+    rot: jax.Array,
+    ang_vel: jax.Array,
+    com_pos_des: jax.Array,
+    com_vel_des: jax.Array,
+    rot_des: jax.Array,
+    ang_vel_des: jax.Array,
+    foot_pos: jax.Array,
+    contact: jax.Array,
+    f_a: jax.Array,
+    tau_a: jax.Array,
+) -> BalanceQP:
+    """The balance QP of one env (unbatched; vmap it). World frame throughout.
+
+    Args:
+      params: the configuration (see BalanceParams).
+      com_pos, com_vel: (3,) COM position (m) and velocity (m/s).
+      rot: (3, 3) trunk orientation, body -> world.  ang_vel: (3,) world angular velocity (rad/s).
+      com_pos_des, com_vel_des, rot_des, ang_vel_des: the desired values of the same.
+      foot_pos: (4, 3) foot positions (m), order FR, FL, RR, RL.
+      contact: (4,) bool, True for a stance foot.
+      f_a: (3,) force (N) and tau_a: (3,) torque about the COM (N·m) applied to the trunk by the
+        arm / payload.
+    """
+    dtype = jp.float32
+    m = params.mass
+    rz = yaw_rotation(rot)
+    inertia_w_inv = rz @ jp.linalg.inv(params.inertia) @ rz.T  # (3, 3) yaw-frame approximation
+    r = foot_pos - com_pos  # (4, 3) lever arms
+    c = contact.astype(dtype)
+    lin = jp.tile(jp.eye(3, dtype=dtype) / m, (1, N_FEET))  # (3, 12)
+    ang = jp.concatenate([inertia_w_inv @ skew(r[i]) for i in range(N_FEET)], axis=1)  # (3, 12)
+    M = jp.concatenate([lin, ang], axis=0) * jp.repeat(c, 3)[None, :]  # swing columns zeroed
+
+    pose_err = jp.concatenate([com_pos_des - com_pos, rotvec_from_matrix(rot_des @ rot.T)])
+    vel_err = jp.concatenate([com_vel_des - com_vel, ang_vel_des - ang_vel])
+    qdd_des = params.kp * pose_err + params.kd * vel_err  # (6,) eq. 9
+    g_tilde = jp.array([0.0, 0.0, GRAVITY, 0.0, 0.0, 0.0], dtype)
+    wrench_a = jp.concatenate([f_a / m, inertia_w_inv @ tau_a])  # A f_a + B tau_a
+    b = qdd_des + g_tilde - wrench_a  # (6,)
+
+    MtQ = M.T * params.Q[None, :]  # (12, 6)
+    P = MtQ @ M + jp.diag(params.R)
+    P = 0.5 * (P + P.T)
+    q = -MtQ @ b
+    const = 0.5 * jp.sum(params.Q * b * b)
+    G, h = friction_constraints(params.mu, params.f_min, params.f_max, contact)
+    return BalanceQP(P=P, q=q, G=G, h=h, const=const, M=M, b=b, qdd_des=qdd_des)
+
+
+def solve_balance(
+    params: BalanceParams,
+    com_pos: jax.Array,
+    com_vel: jax.Array,
+    rot: jax.Array,
+    ang_vel: jax.Array,
+    com_pos_des: jax.Array,
+    com_vel_des: jax.Array,
+    rot_des: jax.Array,
+    ang_vel_des: jax.Array,
+    foot_pos: jax.Array,
+    contact: jax.Array,
+    f_a: jax.Array,
+    tau_a: jax.Array,
+    warm_start: qp.QPResult | None = None,
+    settings: qp.QPSettings | None = None,
+) -> tuple[jax.Array, qp.QPResult]:
+    """Build and solve the balance QP: foot forces (4, 3) (N, world; swing feet exactly 0)."""
+    prob = build_balance_qp(
+        params, com_pos, com_vel, rot, ang_vel, com_pos_des, com_vel_des, rot_des, ang_vel_des,
+        foot_pos, contact, f_a, tau_a,
+    )
+    res = qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=warm_start, settings=settings)
+    forces = res.x.reshape(N_FEET, 3) * contact.astype(res.x.dtype)[:, None]
+    return forces, res

@@ -1,0 +1,326 @@
+"""Arms that mount on the A1 trunk.
+
+`ArmSpec` is a WidowX-like parametric arm built from primitives: waist (yaw), shoulder, elbow and
+wrist (pitch) hinges plus a one-finger parallel gripper. `UrdfArm` is an arm from the
+example-robot-data wheel (SO-100, Unitree Z1), structurally different, used to test transfer.
+
+Every arm is built as its own `MjSpec` whose root body (the arm's base, fixed to the trunk) holds a
+site `mount` with a force and a torque sensor, and is attached to the trunk with a name prefix
+`arm<i>/`. MuJoCo's force/torque sensors read the wrench the *trunk exerts on the arm* at that site,
+in the site frame; `dpc_mjx.robots.layout` turns this into the wrench the arm puts on the trunk.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import mujoco
+import numpy as np
+
+from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import a1
+from dpc_mjx.robots.urdf import VISUAL_GROUP, load_urdf, make_visual
+
+MOUNT_SITE = "mount"
+EE_SITE = "ee"
+FORCE_SENSOR = "mount_force"  # N, site frame
+TORQUE_SENSOR = "mount_torque"  # N·m, site frame
+
+# Fixed geometry of the parametric arm (m).
+BASE_HEIGHT = 0.03  # mount plate to waist joint
+PALM_LENGTH = 0.05  # gripper palm along the wrist axis
+FINGER_LENGTH = 0.04
+FINGER_TRAVEL = 0.03  # slide range of the moving finger
+FINGER_MASS_FRACTION = 0.2  # of gripper_mass; the palm carries the rest
+
+ARM_ARMATURE = 0.01  # kg·m² on every arm joint, keeps stiff position servos stable at dt 4 ms
+ARM_DAMPING = 0.05  # N·m·s/rad
+
+
+@dataclasses.dataclass(frozen=True)
+class Mount:
+    """Where an arm's base sits on the trunk: position (m) in the trunk frame and yaw (rad)."""
+
+    pos: tuple[float, float, float] = (0.09, 0.0, a1.TRUNK_HALF_EXTENTS[2])
+    yaw: float = 0.0
+
+    def validate(self, what: str = "mount") -> None:
+        values = (*self.pos, self.yaw)
+        if len(self.pos) != 3 or not all(math.isfinite(float(v)) for v in values):
+            raise DpcError(f"{what}: pos must be 3 finite numbers and yaw finite, got {self}.")
+        for axis, v, half in zip("xyz", self.pos, a1.TRUNK_HALF_EXTENTS, strict=True):
+            if abs(v) > half + 1e-9:
+                raise DpcError(
+                    f"{what}: pos {axis}={v:.3f} m is outside the A1 trunk (|{axis}| <= {half} m); "
+                    f"mount the arm on the trunk, e.g. on its top face z={a1.TRUNK_HALF_EXTENTS[2]}."
+                )
+
+
+@dataclasses.dataclass(frozen=True)
+class Servo:
+    """Position servo of one arm joint: gains and force limit."""
+
+    kp: float  # N·m/rad (N/m for the finger)
+    kv: float  # N·m·s/rad
+    force: float  # N·m (N for the finger)
+
+
+# Joint name -> servo, in kinematic order.
+WIDOWX_SERVOS = {
+    "waist": Servo(20.0, 1.0, 10.0),
+    "shoulder": Servo(40.0, 2.0, 20.0),
+    "elbow": Servo(30.0, 1.5, 15.0),
+    "wrist": Servo(10.0, 0.5, 5.0),
+    "gripper": Servo(100.0, 2.0, 10.0),
+}
+WIDOWX_RANGES = {  # rad (m for the finger)
+    "waist": (-math.pi, math.pi),
+    "shoulder": (-1.9, 1.9),
+    "elbow": (-1.6, 2.1),
+    "wrist": (-1.8, 2.1),
+    "gripper": (0.0, FINGER_TRAVEL),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class ArmSpec:
+    """A WidowX-like arm: 4 DOF (waist, shoulder, elbow, wrist pitch) + a gripper, from primitives.
+
+    At zero joint angles the upper arm points up (+z) and the forearm, wrist and gripper point
+    forward (+x of the mount): the WidowX "home" L-pose. Positive shoulder/elbow/wrist angles pitch
+    the arm forward/down. Lengths in m, masses in kg.
+    """
+
+    upper_arm_length: float = 0.14  # the paper's "biceps": shoulder axis to elbow axis
+    forearm_length: float = 0.14  # elbow axis to wrist axis
+    wrist_length: float = 0.07  # wrist axis to gripper palm
+    shoulder_height: float = 0.06  # mount plate to shoulder axis
+    link_radius: float = 0.018
+    base_mass: float = 0.25  # fixed to the trunk
+    turret_mass: float = 0.15  # rotates with the waist
+    upper_arm_mass: float = 0.2
+    forearm_mass: float = 0.15
+    wrist_mass: float = 0.08
+    gripper_mass: float = 0.1  # palm + finger (+ any payload you add here)
+    mount: Mount = Mount()
+
+    @property
+    def mass(self) -> float:
+        """Total arm mass (kg), base included."""
+        return (
+            self.base_mass
+            + self.turret_mass
+            + self.upper_arm_mass
+            + self.forearm_mass
+            + self.wrist_mass
+            + self.gripper_mass
+        )
+
+    def validate(self, what: str = "arm") -> None:
+        for f in dataclasses.fields(self):
+            if f.name == "mount":
+                continue
+            v = getattr(self, f.name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise DpcError(
+                    f"{what}: {f.name} must be a positive finite number (m or kg), got {v!r}."
+                )
+        if self.shoulder_height <= BASE_HEIGHT:
+            raise DpcError(
+                f"{what}: shoulder_height={self.shoulder_height} m must exceed the base plate "
+                f"height {BASE_HEIGHT} m."
+            )
+        if self.link_radius * 2 >= min(self.upper_arm_length, self.forearm_length):
+            raise DpcError(f"{what}: link_radius={self.link_radius} m is too thick for its links.")
+        self.mount.validate(f"{what}.mount")
+
+
+@dataclasses.dataclass(frozen=True)
+class UrdfArm:
+    """An arm from the example-robot-data wheel, attached at `mount`: 'so100' or 'z1'."""
+
+    urdf: str
+    mount: Mount = Mount()
+
+    def validate(self, what: str = "arm") -> None:
+        if self.urdf not in URDF_ARMS:
+            raise DpcError(f"{what}: unknown URDF arm {self.urdf!r}; known: {sorted(URDF_ARMS)}.")
+        self.mount.validate(f"{what}.mount")
+
+
+@dataclasses.dataclass(frozen=True)
+class _UrdfArmInfo:
+    root: str  # root link kept as the arm base
+    drop: tuple[str, ...]  # dummy links removed before loading
+    ee_body: str
+    ee_offset: tuple[float, float, float]  # m, in ee_body's frame
+    home: dict[str, float]  # rad; joints not named start at 0 clipped into their range
+
+
+URDF_ARMS = {
+    # SO-100 (5 DOF + jaw). Its URDF <limit effort=35> is far above the real servos; we cap gains.
+    "so100": _UrdfArmInfo("base", (), "gripper", (0.0, -0.09, 0.0), {"shoulder_lift": 0.3}),
+    # Unitree Z1 (6 DOF + gripper), folded in its URDF zero pose.
+    "z1": _UrdfArmInfo("link00", ("world",), "link06", (0.15, 0.0, 0.0), {}),
+}
+_URDF_KP_CAP = 40.0  # N·m/rad
+
+
+def arm_spec(arm: ArmSpec | UrdfArm) -> mujoco.MjSpec:
+    """The arm alone as a spec: one root body at the origin (to attach at a trunk site)."""
+    if isinstance(arm, ArmSpec):
+        return _widowx_spec(arm)
+    return _urdf_arm_spec(arm)
+
+
+def home_qpos(arm: ArmSpec | UrdfArm, model: mujoco.MjModel, prefix: str) -> dict[str, float]:
+    """Home joint angle (rad or m) per joint name of an attached arm."""
+    if isinstance(arm, ArmSpec):
+        return {prefix + name: 0.0 for name in WIDOWX_SERVOS}
+    info = URDF_ARMS[arm.urdf]
+    home = {}
+    for j in range(model.njnt):
+        name = model.joint(j).name
+        if name.startswith(prefix):
+            lo, hi = model.jnt_range[j]
+            q = info.home.get(name.removeprefix(prefix), 0.0)
+            home[name] = float(np.clip(q, lo + 0.05, hi - 0.05)) if model.jnt_limited[j] else q
+    return home
+
+
+def _add_mount_sensors(spec: mujoco.MjSpec, root: mujoco.MjsBody) -> None:
+    root.add_site(name=MOUNT_SITE, size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES)
+    for kind, name in (
+        (mujoco.mjtSensor.mjSENS_FORCE, FORCE_SENSOR),
+        (mujoco.mjtSensor.mjSENS_TORQUE, TORQUE_SENSOR),
+    ):
+        spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=MOUNT_SITE)
+
+
+def _add_servo(spec: mujoco.MjSpec, joint: str, servo: Servo) -> None:
+    act = spec.add_actuator(name=joint, target=joint, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    act.set_to_position(kp=servo.kp, kv=servo.kv)
+    act.forcelimited = True
+    act.forcerange = [-servo.force, servo.force]
+
+
+def _set_inertia(body: mujoco.MjsBody, mass: float, com: tuple, inertia: np.ndarray) -> None:
+    body.explicitinertial = True
+    body.mass = mass
+    body.ipos = list(com)
+    body.inertia = list(inertia)
+
+
+def rod_inertia(mass, length, radius, axis: int):
+    """Diagonal inertia (kg·m²) about the COM of a solid cylinder along `axis` (0=x, 1=y, 2=z).
+
+    Works on numpy or jax arrays, so batched link lengths use the same formula as the compiler.
+    """
+    across = mass * (3 * radius**2 + length**2) / 12
+    along = mass * radius**2 / 2
+    return [along if i == axis else across for i in range(3)]
+
+
+def box_inertia(mass, half):
+    """Diagonal inertia (kg·m²) of a solid box with half extents `half` (3,)."""
+    hx, hy, hz = half
+    return [mass * (hy**2 + hz**2) / 3, mass * (hx**2 + hz**2) / 3, mass * (hx**2 + hy**2) / 3]
+
+
+def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
+    spec = mujoco.MjSpec()
+    spec.modelname = "widowx"
+    r = arm.link_radius
+    capsule, box, cyl = (
+        mujoco.mjtGeom.mjGEOM_CAPSULE,
+        mujoco.mjtGeom.mjGEOM_BOX,
+        mujoco.mjtGeom.mjGEOM_CYLINDER,
+    )
+    rgba = [0.15, 0.15, 0.15, 1]
+
+    base = spec.worldbody.add_body(name="base")
+    base.fuse = 0  # keep the welded base apart from the trunk: the mount sensors live in it
+    _set_inertia(base, arm.base_mass, (0, 0, BASE_HEIGHT / 2), rod_inertia(arm.base_mass, BASE_HEIGHT, 0.04, 2))
+    base.add_geom(type=cyl, size=[0.04, BASE_HEIGHT / 2, 0], pos=[0, 0, BASE_HEIGHT / 2], rgba=rgba)
+    _add_mount_sensors(spec, base)
+
+    turret = base.add_body(name="turret", pos=[0, 0, BASE_HEIGHT])
+    turret_h = arm.shoulder_height - BASE_HEIGHT
+    _set_inertia(turret, arm.turret_mass, (0, 0, turret_h / 2), rod_inertia(arm.turret_mass, turret_h, 0.03, 2))
+    turret.add_geom(type=cyl, size=[0.03, turret_h / 2, 0], pos=[0, 0, turret_h / 2], rgba=rgba)
+
+    upper = turret.add_body(name="upper_arm", pos=[0, 0, turret_h])
+    L1 = arm.upper_arm_length
+    _set_inertia(upper, arm.upper_arm_mass, (0, 0, L1 / 2), rod_inertia(arm.upper_arm_mass, L1, r, 2))
+    upper.add_geom(name="upper_arm", type=capsule, size=[r, 0, 0], fromto=[0, 0, 0, 0, 0, L1])
+
+    fore = upper.add_body(name="forearm", pos=[0, 0, L1])
+    L2 = arm.forearm_length
+    _set_inertia(fore, arm.forearm_mass, (L2 / 2, 0, 0), rod_inertia(arm.forearm_mass, L2, r, 0))
+    fore.add_geom(name="forearm", type=capsule, size=[r, 0, 0], fromto=[0, 0, 0, L2, 0, 0])
+
+    wrist = fore.add_body(name="wrist", pos=[L2, 0, 0])
+    L3 = arm.wrist_length
+    _set_inertia(wrist, arm.wrist_mass, (L3 / 2, 0, 0), rod_inertia(arm.wrist_mass, L3, 0.8 * r, 0))
+    wrist.add_geom(type=capsule, size=[0.8 * r, 0, 0], fromto=[0, 0, 0, L3, 0, 0])
+
+    palm_half = (PALM_LENGTH / 2, 0.03, 0.015)
+    gripper = wrist.add_body(name="gripper", pos=[L3, 0, 0])
+    gripper.fuse = 0  # welded, but kept as its own body so its mass can be batched
+    palm_mass = (1 - FINGER_MASS_FRACTION) * arm.gripper_mass
+    _set_inertia(gripper, palm_mass, (palm_half[0], 0, 0), box_inertia(palm_mass, palm_half))
+    gripper.add_geom(type=box, size=list(palm_half), pos=[palm_half[0], 0, 0], rgba=rgba)
+    jaw_half = (FINGER_LENGTH / 2, 0.004, 0.012)
+    gripper.add_geom(type=box, size=list(jaw_half), pos=[PALM_LENGTH + jaw_half[0], -0.026, 0])
+    gripper.add_site(name=EE_SITE, pos=[PALM_LENGTH + FINGER_LENGTH, 0, 0], size=[0.01, 0, 0],
+                     group=a1.VISUAL_GROUP_SITES)
+
+    finger = gripper.add_body(name="finger", pos=[PALM_LENGTH, 0.026, 0])
+    finger_mass = FINGER_MASS_FRACTION * arm.gripper_mass
+    _set_inertia(finger, finger_mass, (jaw_half[0], 0, 0), box_inertia(finger_mass, jaw_half))
+    finger.add_geom(type=box, size=list(jaw_half), pos=[jaw_half[0], 0, 0])
+
+    for body, name, axis in (
+        (turret, "waist", [0, 0, 1]),
+        (upper, "shoulder", [0, 1, 0]),
+        (fore, "elbow", [0, 1, 0]),
+        (wrist, "wrist", [0, 1, 0]),
+        (finger, "gripper", [0, -1, 0]),  # positive closes the finger onto the fixed jaw
+    ):
+        kind = mujoco.mjtJoint.mjJNT_SLIDE if name == "gripper" else mujoco.mjtJoint.mjJNT_HINGE
+        body.add_joint(name=name, type=kind, axis=axis, range=list(WIDOWX_RANGES[name]),
+                       armature=ARM_ARMATURE, damping=[ARM_DAMPING, 0, 0])
+        _add_servo(spec, name, WIDOWX_SERVOS[name])
+
+    for geom in spec.geoms:
+        make_visual(geom)
+    return spec
+
+
+def _urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
+    info = URDF_ARMS[arm.urdf]
+    spec = load_urdf(arm.urdf, drop_links=info.drop)
+    spec.modelname = arm.urdf
+    root = spec.body(info.root)
+    root.fuse = 0  # keep the root body apart from the trunk: the mount sensors live in it
+    _add_mount_sensors(spec, root)
+    spec.body(info.ee_body).add_site(name=EE_SITE, pos=list(info.ee_offset), size=[0.01, 0, 0],
+                                     group=a1.VISUAL_GROUP_SITES)
+    # Capsules between successive joint origins, so the arm is visible without its meshes.
+    for body in spec.bodies:
+        if body.name in ("world", info.root):
+            continue
+        if np.linalg.norm(body.pos) > 1e-3:
+            body.parent.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[0.012, 0, 0],
+                                 fromto=[0, 0, 0, *body.pos])
+    for joint in spec.joints:
+        joint.armature = ARM_ARMATURE
+        joint.damping = [max(joint.damping[0], ARM_DAMPING), 0, 0]
+        effort = float(joint.actfrcrange[1]) or _URDF_KP_CAP
+        kp = min(effort, _URDF_KP_CAP)
+        _add_servo(spec, joint.name, Servo(kp=kp, kv=0.05 * kp, force=effort))
+    for geom in spec.geoms:
+        make_visual(geom)
+        geom.group = VISUAL_GROUP
+    return spec

@@ -1,0 +1,99 @@
+"""Assemble a robot variant (A1 + arms) and its scene with `mujoco.MjSpec`, and compile it."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from dpc_mjx.robots import a1, arms
+from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
+
+HOME_KEY = "home"
+
+# Simulation options, chosen for MJX throughput at unchanged stability (docs/decisions.md).
+TIMESTEP = 0.004  # s; the policy's 50 Hz is 5 physics steps
+SOLVER_ITERATIONS = 4
+LS_ITERATIONS = 8
+
+
+def arm_prefix(i: int) -> str:
+    """Name prefix of everything belonging to arm `i` (joints, actuators, sites, sensors)."""
+    return f"arm{i}/"
+
+
+def robot_spec(robot: str | Arm | RobotSpec) -> mujoco.MjSpec:
+    """The robot alone (no floor): A1, arms attached at their mounts, options, home keyframe."""
+    robot = resolve(robot)
+    spec = a1.a1_spec()
+    spec.modelname = f"a1_{robot.name}"
+    trunk = spec.body(a1.TRUNK)
+    for i, arm in enumerate(robot.arms):
+        yaw = arm.mount.yaw
+        site = trunk.add_site(
+            name=f"{arm_prefix(i)}mount_frame",
+            pos=list(arm.mount.pos),
+            quat=[math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)],
+            group=a1.VISUAL_GROUP_SITES,
+        )
+        spec.attach(arms.arm_spec(arm), prefix=arm_prefix(i), site=site)
+
+    spec.option.timestep = TIMESTEP
+    spec.option.iterations = SOLVER_ITERATIONS
+    spec.option.ls_iterations = LS_ITERATIONS
+    spec.option.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+
+    model = spec.compile()
+    qpos, ctrl = _home(robot, model)
+    spec.add_key(name=HOME_KEY, qpos=list(qpos), ctrl=list(ctrl))
+    return spec
+
+
+def add_scene(spec: mujoco.MjSpec) -> mujoco.MjSpec:
+    """Add the floor, light, sky and a tracking camera to `spec` (in place) and return it."""
+    spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
+    spec.visual.global_.azimuth = 120
+    spec.visual.global_.elevation = -20
+    spec.add_texture(name="skybox", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+                     builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT, rgb1=[0.3, 0.5, 0.7],
+                     rgb2=[0, 0, 0], width=512, height=3072)
+    spec.add_texture(name="groundplane", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                     builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.2, 0.3, 0.4],
+                     rgb2=[0.1, 0.2, 0.3], mark=mujoco.mjtMark.mjMARK_EDGE, markrgb=[0.8, 0.8, 0.8],
+                     width=300, height=300)
+    mat = spec.add_material(name="groundplane", texrepeat=[5, 5], texuniform=True, reflectance=0.2)
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "groundplane"
+    world = spec.worldbody
+    world.add_light(pos=[0, 0, 1.5], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05],
+                   material="groundplane", contype=a1.FLOOR_CONTYPE,
+                   conaffinity=a1.FLOOR_CONAFFINITY)
+    return spec
+
+
+def build_spec(robot: str | Arm | RobotSpec) -> mujoco.MjSpec:
+    """Robot and scene as one spec, ready to compile or edit."""
+    return add_scene(robot_spec(robot))
+
+
+def build(robot: str | Arm | RobotSpec) -> mujoco.MjModel:
+    """Compile a variant: a name from `VARIANTS`, an `ArmSpec`/`UrdfArm`, or a `RobotSpec`."""
+    return build_spec(robot).compile()
+
+
+def _home(robot: RobotSpec, model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    """Home qpos (nq,) and ctrl (nu,): standing legs, arms in their home pose as servo targets."""
+    joint_q = dict(zip(a1.LEG_JOINTS, a1.home_leg_qpos(), strict=True))
+    for i, arm in enumerate(robot.arms):
+        joint_q.update(arms.home_qpos(arm, model, arm_prefix(i)))
+    qpos = model.qpos0.copy()
+    qpos[:7] = [0, 0, a1.HOME_HEIGHT, 1, 0, 0, 0]
+    for name, q in joint_q.items():
+        qpos[model.joint(name).qposadr[0]] = q
+    ctrl = np.zeros(model.nu)
+    for a in range(model.nu):
+        if model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE:  # position servo
+            ctrl[a] = qpos[model.jnt_qposadr[model.actuator_trnid[a, 0]]]
+    return qpos, ctrl

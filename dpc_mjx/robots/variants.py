@@ -1,0 +1,84 @@
+"""Named robot variants: the A1 with zero, one or two arms (the paper's Table I and more)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import a1
+from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
+
+MAX_ARMS = 2
+MIN_MOUNT_SEPARATION = 0.08  # m between two arm bases (their plates are 0.04 m in radius)
+
+Arm = ArmSpec | UrdfArm
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotSpec:
+    """The A1 and the arms mounted on it (structure: changing it means a new compile)."""
+
+    name: str
+    arms: tuple[Arm, ...] = ()
+
+    def validate(self) -> None:
+        if not isinstance(self.arms, tuple):
+            raise DpcError(f"{self.name}: arms must be a tuple of ArmSpec/UrdfArm, got {self.arms!r}.")
+        if len(self.arms) > MAX_ARMS:
+            raise DpcError(
+                f"{self.name}: {len(self.arms)} arms given, the A1 trunk carries at most {MAX_ARMS}."
+            )
+        for i, arm in enumerate(self.arms):
+            if not isinstance(arm, (ArmSpec, UrdfArm)):
+                raise DpcError(f"{self.name}: arm {i} is a {type(arm).__name__}, not ArmSpec/UrdfArm.")
+            arm.validate(f"{self.name}.arms[{i}]")
+        if len(self.arms) == 2:
+            gap = math.dist(self.arms[0].mount.pos, self.arms[1].mount.pos)
+            if gap < MIN_MOUNT_SEPARATION:
+                raise DpcError(
+                    f"{self.name}: the two arm mounts are {gap:.3f} m apart; move them at least "
+                    f"{MIN_MOUNT_SEPARATION} m apart (e.g. y=+-0.06)."
+                )
+
+    @property
+    def arm_mass(self) -> float:
+        """Mass (kg) of the parametric arms; URDF arms are weighed on the compiled model."""
+        return sum(arm.mass for arm in self.arms if isinstance(arm, ArmSpec))
+
+
+_TOP = a1.TRUNK_HALF_EXTENTS[2]  # m, top face of the trunk
+
+VARIANTS: dict[str, RobotSpec] = {
+    spec.name: spec
+    for spec in (
+        RobotSpec("none"),
+        RobotSpec("regular", (ArmSpec(),)),  # Table I: biceps 0.14 m, gripper 0.1 kg
+        RobotSpec("longer", (ArmSpec(upper_arm_length=0.28),)),
+        RobotSpec("heavier", (ArmSpec(gripper_mass=0.5),)),
+        RobotSpec(
+            "double",
+            (ArmSpec(mount=Mount((0.09, 0.06, _TOP))), ArmSpec(mount=Mount((0.09, -0.06, _TOP)))),
+        ),
+        RobotSpec("so100", (UrdfArm("so100"),)),
+        RobotSpec("z1", (UrdfArm("z1"),)),
+    )
+}
+
+
+def resolve(robot: str | Arm | RobotSpec) -> RobotSpec:
+    """A variant name, a single arm or a `RobotSpec`, as a validated `RobotSpec`."""
+    if isinstance(robot, str):
+        if robot not in VARIANTS:
+            raise DpcError(f"Unknown arm variant {robot!r}; known variants: {sorted(VARIANTS)}.")
+        spec = VARIANTS[robot]
+    elif isinstance(robot, (ArmSpec, UrdfArm)):
+        spec = RobotSpec("custom", (robot,))
+    elif isinstance(robot, RobotSpec):
+        spec = robot
+    else:
+        raise DpcError(
+            f"Expected a variant name, an ArmSpec/UrdfArm or a RobotSpec, got {type(robot).__name__}."
+        )
+    spec.validate()
+    return spec
