@@ -1,0 +1,165 @@
+"""The low-level controller (paper §III-D): gait schedule, balance QP for stance feet with the
+disturbance terms u = [f_a, tau_a], Cartesian PD for swing feet, tau = J^T f, arm joint servos.
+
+Unbatched and pure: `LowLevelController.init(data)` and `.step(state, data, command, u)` act on one
+env's `mjx.Data`; vmap at the call site. Controllers differ only in u:
+
+- `mbc`: u = 0 (the paper's model-based baseline, after Di Carlo et al. 2018);
+- `oracle`: u = the measured arm-mount wrench (privileged upper bound, `oracle_u`);
+- anything else (the DPC policy): pass its u.
+
+The controller's model is the bare A1 (trunk + legs, mass and inertia at the home pose): the arm
+is exactly the disturbance it does not model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jp
+import mujoco
+from flax import struct
+
+from dpc_mjx.control import balance, gait, qp, swing
+from dpc_mjx.control.state import BodyState, StateIndex, read_state, state_index
+from dpc_mjx.robots.a1 import FOOT_RADIUS
+from dpc_mjx.robots.layout import Layout, layout, mount_wrench
+
+
+@struct.dataclass
+class ControllerConfig:
+    """Tunable numbers of the low-level controller (arrays or floats; no structure)."""
+
+    balance: balance.BalanceParams
+    gait: gait.Gait
+    body_height: float = 0.26  # m, desired COM height
+    swing_height: float = 0.08  # m, apex of a swing above the straight line
+    swing_kp: jax.Array = struct.field(default_factory=lambda: jp.array([500.0, 500.0, 500.0]))
+    swing_kd: jax.Array = struct.field(default_factory=lambda: jp.array([15.0, 15.0, 15.0]))
+    raibert_k: float = 0.03  # s, velocity feedback of the foothold
+    max_pos_error: float = 0.05  # m, clamp of the horizontal COM tracking error
+    torque_limit: float = 33.5  # N·m, A1 joint torque limit
+
+
+@struct.dataclass
+class ControllerState:
+    t: jax.Array  # () s since init
+    pos_des: jax.Array  # (3,) desired COM position (x, y integrated from the command)
+    yaw_des: jax.Array  # () rad
+    swing_start: jax.Array  # (4, 3) foot positions at the last lift-off
+    stance: jax.Array  # (4,) bool, stance at the previous tick
+    qp: qp.QPResult  # warm start for the next balance QP
+    forces: jax.Array  # (4, 3) last ground reaction forces asked of the stance feet, N
+
+
+def yaw_of(rot: jax.Array) -> jax.Array:
+    return jp.arctan2(rot[1, 0], rot[0, 0])
+
+
+def rot_z(yaw: jax.Array) -> jax.Array:
+    c, s = jp.cos(yaw), jp.sin(yaw)
+    return jp.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclasses.dataclass(frozen=True)
+class LowLevelController:
+    """Static parts (indices, dt) plus the config; `init`/`step` are pure JAX."""
+
+    idx: StateIndex
+    lay: Layout
+    dt: float  # s, the control period (= physics step)
+    config: ControllerConfig
+    arm_home: jax.Array  # (n_arm_act,) servo targets of the home pose
+
+    def init(self, d) -> ControllerState:
+        s = read_state(self.idx, d)
+        zero = jp.zeros(balance.N_VARS)
+        warm = qp.solve(jp.eye(balance.N_VARS), zero, jp.zeros((balance.N_ROWS, balance.N_VARS)),
+                        jp.ones(balance.N_ROWS), settings=qp.QPSettings(iterations=1))
+        return ControllerState(
+            t=jp.zeros(()),
+            pos_des=s.com_pos.at[2].set(self.config.body_height),
+            yaw_des=yaw_of(s.rot),
+            swing_start=s.foot_pos,
+            stance=jp.ones(4, bool),
+            qp=jax.tree.map(jp.zeros_like, warm),
+            forces=jp.zeros((4, 3)),
+        )
+
+    def step(self, cs: ControllerState, d, command: jax.Array, u: jax.Array,
+             arm_targets: jax.Array | None = None) -> tuple[ControllerState, jax.Array]:
+        """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
+        rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM.
+        Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
+        cfg = self.config
+        s = read_state(self.idx, d)
+        stance, progress = gait.contact_schedule(cfg.gait, cs.t)
+
+        # Desired body motion: integrate the command, keep the tracking error bounded.
+        yaw_des = cs.yaw_des + command[2] * self.dt
+        vel_des = rot_z(yaw_des) @ jp.array([command[0], command[1], 0.0])
+        pos_des = cs.pos_des + vel_des * self.dt
+        err = jp.clip(pos_des[:2] - s.com_pos[:2], -cfg.max_pos_error, cfg.max_pos_error)
+        pos_des = pos_des.at[:2].set(s.com_pos[:2] + err).at[2].set(cfg.body_height)
+
+        contact_points = s.foot_pos.at[:, 2].add(-FOOT_RADIUS)  # forces act at the ground
+        forces, res = balance.solve_balance(
+            cfg.balance, s.com_pos, s.com_vel, s.rot, s.ang_vel, pos_des, vel_des,
+            rot_z(yaw_des), jp.array([0.0, 0.0, command[2]]), contact_points, stance,
+            u[:3], u[3:], warm_start=cs.qp,
+        )
+
+        # Swing feet: record lift-off, track a trajectory to the Raibert foothold.
+        lift_off = cs.stance & ~stance
+        swing_start = jp.where(lift_off[:, None], s.foot_pos, cs.swing_start)
+        target = swing.raibert_foothold(s.hip_pos, s.com_vel, vel_des, command[2], s.com_pos,
+                                        cfg.gait.stance_time, cfg.raibert_k)
+        p_des, v_des = swing.swing_trajectory(swing_start, target, progress, cfg.gait.swing_time,
+                                              cfg.swing_height)
+        f_swing = swing.swing_force(p_des, v_des, s.foot_pos, s.foot_vel, cfg.swing_kp,
+                                    cfg.swing_kd)
+
+        # Stance legs push the ground with -f (so the ground pushes back with f); swing legs
+        # apply the PD force: tau = J^T f per leg.
+        f_leg = jp.where(stance[:, None], -forces, f_swing)  # (4, 3)
+        tau = jp.einsum("fcj,fc->fj", s.foot_jac, f_leg).reshape(-1)
+        tau = jp.clip(tau, -cfg.torque_limit, cfg.torque_limit)
+
+        ctrl = jp.zeros(d.ctrl.shape).at[self.lay.leg_act].set(tau)
+        if self.lay.arms:
+            targets = self.arm_home if arm_targets is None else arm_targets
+            ctrl = ctrl.at[self.lay.arm_act].set(targets)
+        new = ControllerState(t=cs.t + self.dt, pos_des=pos_des, yaw_des=yaw_des,
+                              swing_start=swing_start, stance=stance, qp=res, forces=forces)
+        return new, ctrl
+
+
+def make_controller(model: mujoco.MjModel, config: ControllerConfig | None = None,
+                    gait_: gait.Gait | None = None) -> LowLevelController:
+    """A controller for a compiled variant. The balance model is the bare A1 (see module doc)."""
+    lay = layout(model)
+    idx = state_index(model, lay)
+    if config is None:
+        params = balance.default_params(mass=idx.a1_mass, inertia=(1.0, 1.0, 1.0))
+        params = dataclasses.replace(params, inertia=jp.asarray(idx.a1_inertia, jp.float32))
+        config = ControllerConfig(balance=params, gait=gait_ or gait.trot())
+    arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)
+    return LowLevelController(idx=idx, lay=lay, dt=float(model.opt.timestep), config=config,
+                              arm_home=arm_home)
+
+
+def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
+    """(6,) u from the measured mount wrenches: total arm force on the trunk (N) and its torque
+    about the A1 COM (N·m), world frame — the privileged oracle's disturbance estimate."""
+    f_a, tau_a = jp.zeros(3), jp.zeros(3)
+    for arm in lay.arms:
+        force, torque = mount_wrench(arm, d)
+        lever = d.site_xpos[arm.mount_site] - com_pos
+        f_a = f_a + force
+        tau_a = tau_a + torque + jp.cross(lever, force)
+    return jp.concatenate([f_a, tau_a])
+
+
+__all__ = ["BodyState", "ControllerConfig", "ControllerState", "LowLevelController",
+           "make_controller", "oracle_u"]

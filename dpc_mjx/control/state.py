@@ -1,0 +1,104 @@
+"""The body state the low-level controller sees, read from MJX data (privileged, noise-free).
+
+Frames: world (z up). Data fields read after `mjx.step` mix the new qvel with kinematics of the
+previous step (positions are 4 ms old), as a real sensor pipeline would.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+from flax import struct
+
+from dpc_mjx.robots import a1
+from dpc_mjx.robots.layout import Layout
+
+
+@struct.dataclass
+class BodyState:
+    com_pos: jax.Array  # (3,) m, COM of the A1 (trunk + legs, no arm)
+    com_vel: jax.Array  # (3,) m/s
+    rot: jax.Array  # (3, 3) trunk orientation, body -> world
+    ang_vel: jax.Array  # (3,) rad/s, world frame
+    foot_pos: jax.Array  # (4, 3) foot sphere centres, m
+    foot_vel: jax.Array  # (4, 3) m/s
+    hip_pos: jax.Array  # (4, 3) thigh joint positions, m
+    foot_jac: jax.Array  # (4, 3, 3) d(foot pos)/d(leg joint angles), per leg, m/rad
+
+
+@dataclasses.dataclass(frozen=True)
+class StateIndex:
+    """Static indices (numpy) used to read a `BodyState` from data."""
+
+    trunk: int
+    feet: np.ndarray  # (4,) site ids
+    thighs: np.ndarray  # (4,) body ids
+    leg_dof: np.ndarray  # (4, 3) dof addresses per leg
+    chain_dof: np.ndarray  # (4, 9) root dofs 0..5 + the leg's 3 dofs
+    com_offset: np.ndarray  # (3,) A1 COM in the trunk frame at home, m
+    a1_mass: float  # kg, trunk + legs
+    a1_inertia: np.ndarray  # (3, 3) kg·m², about the A1 COM, trunk frame, at home
+
+
+def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
+    """Indices and the A1's (arm-free) rigid-body model at its home pose."""
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    mujoco.mj_forward(model, data)
+    arm_bodies = set()
+    for arm in lay.arms:
+        arm_bodies.update(int(b) for b in arm.bodies)
+    bodies = [b for b in range(1, model.nbody) if b not in arm_bodies]
+    mass = float(model.body_mass[bodies].sum())
+    com = sum(model.body_mass[b] * data.xipos[b] for b in bodies) / mass
+    inertia = np.zeros((3, 3))
+    for b in bodies:  # parallel-axis sum about the A1 COM, world frame (trunk level, yaw 0)
+        rot = data.ximat[b].reshape(3, 3)
+        r = data.xipos[b] - com
+        inertia += rot @ np.diag(model.body_inertia[b]) @ rot.T
+        inertia += model.body_mass[b] * (r @ r * np.eye(3) - np.outer(r, r))
+    trunk = lay.trunk
+    trunk_rot = data.xmat[trunk].reshape(3, 3)
+    leg_dof = lay.leg_dof.reshape(4, 3)
+    return StateIndex(
+        trunk=trunk,
+        feet=lay.foot_sites,
+        thighs=np.array([model.body(f"{leg}_thigh").id for leg in a1.LEGS]),
+        leg_dof=leg_dof,
+        chain_dof=np.concatenate([np.tile(np.arange(6), (4, 1)), leg_dof], axis=1),
+        com_offset=trunk_rot.T @ (com - data.xpos[trunk]),
+        a1_mass=mass,
+        a1_inertia=trunk_rot.T @ inertia @ trunk_rot,
+    )
+
+
+def read_state(idx: StateIndex, d) -> BodyState:
+    """The `BodyState` of one (unbatched) `mjx.Data`."""
+    rot = d.xmat[idx.trunk]
+    ang_vel = rot @ d.qvel[3:6]  # the free joint's angular velocity is in the trunk frame
+    lever = rot @ jp.asarray(idx.com_offset, jp.float32)
+    com_pos = d.xpos[idx.trunk] + lever
+    com_vel = d.qvel[0:3] + jp.cross(ang_vel, lever)
+    foot_pos = d.site_xpos[idx.feet]
+    root_com = d.subtree_com[idx.trunk]  # the point MJX's cdof are expressed about
+
+    def chain_jac(point, dofs):  # (9, 3): d(point)/d(qvel[dofs])
+        cdof = d.cdof[dofs]
+        return cdof[:, 3:] + jp.cross(cdof[:, :3], point - root_com)
+
+    jac = jax.vmap(chain_jac)(foot_pos, jp.asarray(idx.chain_dof))  # (4, 9, 3)
+    foot_vel = jp.einsum("fkc,fk->fc", jac, d.qvel[idx.chain_dof])
+    return BodyState(
+        com_pos=com_pos,
+        com_vel=com_vel,
+        rot=rot,
+        ang_vel=ang_vel,
+        foot_pos=foot_pos,
+        foot_vel=foot_vel,
+        hip_pos=d.xpos[idx.thighs],
+        foot_jac=jp.swapaxes(jac[:, 6:, :], 1, 2),  # (4, 3 xyz, 3 joints)
+    )
