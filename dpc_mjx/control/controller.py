@@ -53,6 +53,19 @@ class ControllerState:
     forces: jax.Array  # (4, 3) last ground reaction forces asked of the stance feet, N
 
 
+@struct.dataclass
+class Plan:
+    """What one tick decided before solving: state, schedule and desired body motion."""
+
+    state: BodyState
+    stance: jax.Array  # (4,) bool
+    progress: jax.Array  # (4,) swing progress in [0, 1]
+    pos_des: jax.Array  # (3,) m, desired COM position
+    vel_des: jax.Array  # (3,) m/s, world
+    yaw_des: jax.Array  # () rad
+    yaw_rate_des: jax.Array  # () rad/s
+
+
 def yaw_of(rot: jax.Array) -> jax.Array:
     return jp.arctan2(rot[1, 0], rot[0, 0])
 
@@ -87,28 +100,40 @@ class LowLevelController:
             forces=jp.zeros((4, 3)),
         )
 
-    def step(self, cs: ControllerState, d, command: jax.Array, u: jax.Array,
-             arm_targets: jax.Array | None = None) -> tuple[ControllerState, jax.Array]:
-        """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
-        rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM.
-        Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
+    def plan(self, cs: ControllerState, d, command: jax.Array) -> Plan:
+        """Read the state, the gait schedule and the desired body motion of this tick."""
         cfg = self.config
         s = read_state(self.idx, d)
         stance, progress = gait.contact_schedule(cfg.gait, cs.t)
-
         # Desired body motion: integrate the command, keep the tracking error bounded.
         yaw_des = cs.yaw_des + command[2] * self.dt
         vel_des = rot_z(yaw_des) @ jp.array([command[0], command[1], 0.0])
         pos_des = cs.pos_des + vel_des * self.dt
         err = jp.clip(pos_des[:2] - s.com_pos[:2], -cfg.max_pos_error, cfg.max_pos_error)
         pos_des = pos_des.at[:2].set(s.com_pos[:2] + err).at[2].set(cfg.body_height)
+        return Plan(s, stance, progress, pos_des, vel_des, yaw_des, command[2])
 
+    def balance_qp(self, p: Plan, u: jax.Array) -> balance.BalanceQP:
+        """The stance-force QP of this tick (eqs. 5-10) with the disturbance u = [f_a, tau_a]."""
+        s = p.state
         contact_points = s.foot_pos.at[:, 2].add(-FOOT_RADIUS)  # forces act at the ground
-        forces, res = balance.solve_balance(
-            cfg.balance, s.com_pos, s.com_vel, s.rot, s.ang_vel, pos_des, vel_des,
-            rot_z(yaw_des), jp.array([0.0, 0.0, command[2]]), contact_points, stance,
-            u[:3], u[3:], warm_start=cs.qp,
+        return balance.build_balance_qp(
+            self.config.balance, s.com_pos, s.com_vel, s.rot, s.ang_vel, p.pos_des, p.vel_des,
+            rot_z(p.yaw_des), jp.array([0.0, 0.0, p.yaw_rate_des]), contact_points, p.stance,
+            u[:3], u[3:],
         )
+
+    def step(self, cs: ControllerState, d, command: jax.Array, u: jax.Array,
+             arm_targets: jax.Array | None = None) -> tuple[ControllerState, jax.Array]:
+        """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
+        rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM.
+        Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
+        cfg = self.config
+        p = self.plan(cs, d, command)
+        s, stance, progress, vel_des = p.state, p.stance, p.progress, p.vel_des
+        prob = self.balance_qp(p, u)
+        res = qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp)
+        forces = res.x.reshape(4, 3) * stance[:, None]  # N, world, swing feet exactly 0
 
         # Swing feet: record lift-off, track a trajectory to the Raibert foothold.
         lift_off = cs.stance & ~stance
@@ -130,7 +155,7 @@ class LowLevelController:
         if self.lay.arms:
             targets = self.arm_home if arm_targets is None else arm_targets
             ctrl = ctrl.at[self.lay.arm_act].set(targets)
-        new = ControllerState(t=cs.t + self.dt, pos_des=pos_des, yaw_des=yaw_des,
+        new = ControllerState(t=cs.t + self.dt, pos_des=p.pos_des, yaw_des=p.yaw_des,
                               swing_start=swing_start, stance=stance, qp=res, forces=forces)
         return new, ctrl
 
