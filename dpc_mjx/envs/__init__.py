@@ -1,0 +1,1 @@
+"""DPC environments (brax API). So far: the paper's reward (`rewards`)."""
