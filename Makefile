@@ -29,6 +29,7 @@ test: $(STAMP)
 bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_physics.py
 	$(BIN)/python experiments/bench_qp.py
+	$(BIN)/python experiments/bench_controller.py
 
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf

@@ -74,8 +74,11 @@ def run_demo(variants=tuple(VARIANTS), batch: int = 16, seconds: float = 1.0) ->
         resolve(name)  # fail on a bad name before compiling anything
     rows = []
     for i, name in enumerate(variants, 1):
-        print(f"[{i}/{len(variants)}] {name}: building, compiling and standing {batch} envs "
-              f"for {seconds:g} s in MJX ...", flush=True)
+        print(
+            f"[{i}/{len(variants)}] {name}: building, compiling and standing {batch} envs "
+            f"for {seconds:g} s in MJX ...",
+            flush=True,
+        )
         rows.append(stand_variant(name, batch=batch, seconds=seconds))
     print(format_table(rows, batch), flush=True)
     return rows

@@ -46,9 +46,7 @@ def batched_data(
     return commit(jax.vmap(lambda q, v, u: d0.replace(qpos=q, qvel=v, ctrl=u))(qpos, qvel, ctrl))
 
 
-def make_rollout(
-    mx: mjx.Model, n_steps: int, model_axes=None
-) -> Callable[[mjx.Data], mjx.Data]:
+def make_rollout(mx: mjx.Model, n_steps: int, model_axes=None) -> Callable[[mjx.Data], mjx.Data]:
     """jit(vmap(n_steps x mjx.step)) over a batch of data (ctrl held constant).
 
     With `model_axes` (an in_axes tree from `dpc_mjx.robots.params`), `mx` is a batched model

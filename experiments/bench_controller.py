@@ -42,30 +42,41 @@ def bench(variant: str, batch: int, calls: int) -> list[tuple[str, float, float]
     model = build(variant)
     servo = with_leg_servos(model)
     mx_servo = sim.put_model(servo)
-    data = sim.batched_data(mx_servo, perturbed_home(servo, batch),
-                            np.tile(home_ctrl(servo), (batch, 1)))
+    data = sim.batched_data(
+        mx_servo, perturbed_home(servo, batch), np.tile(home_ctrl(servo), (batch, 1))
+    )
     physics = sim.make_rollout(mx_servo, CHUNK)
     c_phys, t_phys = _time(physics, data, calls)
 
     mx = sim.put_model(model)
     controller = make_controller(model, gait_=gait.trot())
-    ls = init_loop(controller, sim.batched_data(mx, perturbed_home(model, batch),
-                                                np.tile(model.key_ctrl[0], (batch, 1))))
+    ls = init_loop(
+        controller,
+        sim.batched_data(mx, perturbed_home(model, batch), np.tile(model.key_ctrl[0], (batch, 1))),
+    )
     cmd = jp.tile(jp.array([0.3, 0.0, 0.0]), (batch, 1))
     zeros = jp.zeros((batch, 6))
 
     def ctrl_only(cs):
         def one(c, d, command):
-            return jax.lax.scan(lambda c, _: (controller.step(c, d, command, jp.zeros(6))[0], None),
-                                c, None, length=CHUNK)[0]
+            return jax.lax.scan(
+                lambda c, _: (controller.step(c, d, command, jp.zeros(6))[0], None),
+                c,
+                None,
+                length=CHUNK,
+            )[0]
+
         return jax.vmap(one)(cs, ls.data, cmd)
 
     c_ctrl, t_ctrl = _time(jax.jit(ctrl_only), ls.ctrl, calls)
     loop = make_chunk(mx, controller, CHUNK, kind="mbc")
     c_loop, t_loop = _time(lambda s: loop(s, cmd, zeros, zeros), ls, calls)
     per = batch * CHUNK
-    return [("MJX physics step", c_phys, t_phys / per), ("controller tick", c_ctrl, t_ctrl / per),
-            ("controller + physics", c_loop, t_loop / per)]
+    return [
+        ("MJX physics step", c_phys, t_phys / per),
+        ("controller tick", c_ctrl, t_ctrl / per),
+        ("controller + physics", c_loop, t_loop / per),
+    ]
 
 
 def main() -> None:
@@ -81,8 +92,11 @@ def main() -> None:
         rows = bench(a.variant, b, a.calls)
         phys = rows[0][2]
         for name, comp, per in rows:
-            print(f"| {b} | {name} | {comp:.1f} | {per * 1e6:.1f} | {1 / per:,.0f} | "
-                  f"{per / phys:.2f} |", flush=True)
+            print(
+                f"| {b} | {name} | {comp:.1f} | {per * 1e6:.1f} | {1 / per:,.0f} | "
+                f"{per / phys:.2f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

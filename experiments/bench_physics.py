@@ -71,21 +71,26 @@ def mjx_rate(model, batch, calls):
 
 
 def physics_table(variants, batches, calls):
-    print("| variant | engine | batch/threads | compile (s) | env-steps/s | ratio to native 1 core |")
+    print(
+        "| variant | engine | batch/threads | compile (s) | env-steps/s | ratio to native 1 core |"
+    )
     print("|---|---|---|---|---|---|")
     for name in variants:
         model = with_leg_servos(build(name))
         loop = native_loop(model)
         base, _ = native_rollout(model, 1)
         two, _ = native_rollout(model, 2)
-        print(f"| {name} | MuJoCo C, Python mj_step loop | 1 | - | {loop:,.0f} | "
-              f"{loop / base:.2f} |")
+        print(
+            f"| {name} | MuJoCo C, Python mj_step loop | 1 | - | {loop:,.0f} | {loop / base:.2f} |"
+        )
         print(f"| {name} | MuJoCo C, rollout | 1 thread | - | {base:,.0f} | 1.00 |")
         print(f"| {name} | MuJoCo C, rollout | 2 threads | - | {two:,.0f} | {two / base:.2f} |")
         for b in batches:
             rate, comp, _ = mjx_rate(model, b, calls)
-            print(f"| {name} | MJX jit(vmap) | {b} | {comp:.1f} | {rate:,.0f} | "
-                  f"{rate / base:.2f} |", flush=True)
+            print(
+                f"| {name} | MJX jit(vmap) | {b} | {comp:.1f} | {rate:,.0f} | {rate / base:.2f} |",
+                flush=True,
+            )
 
 
 SWEEP = {  # name -> (solver, iterations, ls_iterations, timestep)
@@ -99,8 +104,10 @@ SWEEP = {  # name -> (solver, iterations, ls_iterations, timestep)
 
 
 def sweep_table(batch, calls):
-    print(f"\n| MJX options (regular, batch {batch}) | compile (s) | env-steps/s | sim s per wall s "
-          "| min trunk height after 2 s (m) |")
+    print(
+        f"\n| MJX options (regular, batch {batch}) | compile (s) | env-steps/s | sim s per wall s "
+        "| min trunk height after 2 s (m) |"
+    )
     print("|---|---|---|---|---|")
     for label, (solver, iters, ls, dt) in SWEEP.items():
         model = with_leg_servos(build("regular"))
@@ -108,8 +115,9 @@ def sweep_table(batch, calls):
         model.opt.timestep = dt
         n_calls = max(calls, round(2.0 / dt / CHUNK) - 1)
         rate, comp, z = mjx_rate(model, batch, n_calls)
-        print(f"| {label} | {comp:.1f} | {rate:,.0f} | {rate * dt:,.0f} | {z.min():.3f} |",
-              flush=True)
+        print(
+            f"| {label} | {comp:.1f} | {rate:,.0f} | {rate * dt:,.0f} | {z.min():.3f} |", flush=True
+        )
 
 
 def main():

@@ -34,7 +34,8 @@ def main() -> None:
     p.add_argument("--out", type=pathlib.Path, default=None, help="also write the table here")
     a = p.parse_args()
     lines = [
-        f"| variant | controller | gait | command (vx, vy, wz) | falls / {a.envs} | speed RMSE (m/s) "
+        f"| variant | controller | gait | command (vx, vy, wz) | falls / {a.envs} "
+        "| speed RMSE (m/s) "
         "| yaw-rate RMSE (rad/s) | roll RMS (rad) | pitch RMS (rad) | env-steps/s |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -45,10 +46,12 @@ def main() -> None:
                 cmds = [c for g, c in CONDITIONS if g == gait_name]
                 rows = run_locomotion(variant, gait_name, cmds, a.envs, a.seconds, kind)
                 for cmd, r in zip(cmds, rows, strict=True):
-                    line = (f"| {variant} | {kind} | {gait_name} | {cmd} | "
-                            f"{round(r['fall_rate'] * a.envs)} | {r['speed_rmse']:.3f} | "
-                            f"{r['yaw_rate_rmse']:.3f} | {r['roll_rms']:.3f} | "
-                            f"{r['pitch_rms']:.3f} | {r['steps_per_s']:,.0f} |")
+                    line = (
+                        f"| {variant} | {kind} | {gait_name} | {cmd} | "
+                        f"{round(r['fall_rate'] * a.envs)} | {r['speed_rmse']:.3f} | "
+                        f"{r['yaw_rate_rmse']:.3f} | {r['roll_rms']:.3f} | "
+                        f"{r['pitch_rms']:.3f} | {r['steps_per_s']:,.0f} |"
+                    )
                     print(line, flush=True)
                     lines.append(line)
     table = "\n".join(lines)

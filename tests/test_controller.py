@@ -26,8 +26,9 @@ _MAX_TILT_RMS = 0.1  # rad
 
 def _start(model, controller, seed=0):
     mx = sim.put_model(model)
-    data = sim.batched_data(mx, perturbed_home(model, _BATCH, seed=seed),
-                            np.tile(model.key_ctrl[0], (_BATCH, 1)))
+    data = sim.batched_data(
+        mx, perturbed_home(model, _BATCH, seed=seed), np.tile(model.key_ctrl[0], (_BATCH, 1))
+    )
     return mx, init_loop(controller, data)
 
 

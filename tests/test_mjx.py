@@ -1,4 +1,4 @@
-"""The variants in MJX: finite batched stepping, standing, agreement with MuJoCo C, batched params."""
+"""The variants in MJX: finite stepping, standing, agreement with MuJoCo C, batched params."""
 
 import jax
 import jax.numpy as jp
@@ -30,8 +30,9 @@ def standing_run(request):
     """Per variant: batched MJX states after one chunk and after 2 s of standing on servos."""
     model = with_leg_servos(build(request.param))
     mx = sim.put_model(model)
-    data = sim.batched_data(mx, perturbed_home(model, _BATCH, seed=0),
-                            np.tile(home_ctrl(model), (_BATCH, 1)))
+    data = sim.batched_data(
+        mx, perturbed_home(model, _BATCH, seed=0), np.tile(home_ctrl(model), (_BATCH, 1))
+    )
     rollout = sim.make_rollout(mx, _CHUNK)
     first = rollout(data)
     last = first
@@ -71,17 +72,19 @@ def test_mjx_agrees_with_mujoco_c():
 def test_one_compile_serves_a_batch_of_arm_parameters():
     model = with_leg_servos(build("regular"))
     lengths, masses = [0.14, 0.28], [0.1, 0.5]
-    mx, in_axes = batch_arm_params(sim.put_model(model), model, upper_arm_length=lengths,
-                                   gripper_mass=masses)
+    mx, in_axes = batch_arm_params(
+        sim.put_model(model), model, upper_arm_length=lengths, gripper_mass=masses
+    )
     traces = []
 
     def step(m, d):
         traces.append(1)  # runs only while tracing
         return jax.lax.scan(lambda d, _: (mjx.step(m, d), None), d, None, length=50)[0]
 
-    run = jax.jit(lambda m, d: jax.vmap(step, in_axes=(in_axes, 0))(m, d))
-    data = sim.batched_data(mx, np.tile(model.key_qpos[0], (2, 1)),
-                            np.tile(home_ctrl(model), (2, 1)))
+    run = jax.jit(jax.vmap(step, in_axes=(in_axes, 0)))
+    data = sim.batched_data(
+        mx, np.tile(model.key_qpos[0], (2, 1)), np.tile(home_ctrl(model), (2, 1))
+    )
     for _ in range(2):
         data = run(mx, data)
     assert len(traces) == 1
@@ -89,8 +92,9 @@ def test_one_compile_serves_a_batch_of_arm_parameters():
     fz = -np.asarray(jax.vmap(lambda d: mount_wrench(arm, d)[0][2])(data))
     base = model.site_bodyid[arm.mount_site]
     weights = _G * np.asarray(mx.body_subtreemass[:, base])
-    np.testing.assert_allclose(weights, _G * (model.body_subtreemass[base] + np.array([0, 0.4])),
-                               rtol=1e-5)
+    np.testing.assert_allclose(
+        weights, _G * (model.body_subtreemass[base] + np.array([0, 0.4])), rtol=1e-5
+    )
     np.testing.assert_allclose(fz, weights, rtol=_BATCHED_FORCE_RTOL)
     assert fz[1] - fz[0] > 0.3 * _G  # the heavier gripper pushes harder on the trunk
     assert np.asarray(mx.body_pos[:, model.body("arm0/forearm").id, 2]) == pytest.approx(lengths)

@@ -27,13 +27,18 @@ def recorded():
     model = build("regular")
     mx = sim.put_model(model)
     ctl = make_controller(model, gait_=gait.trot())
-    data = sim.batched_data(mx, perturbed_home(model, _BATCH, seed=7),
-                            np.tile(model.key_ctrl[0], (_BATCH, 1)))
+    data = sim.batched_data(
+        mx, perturbed_home(model, _BATCH, seed=7), np.tile(model.key_ctrl[0], (_BATCH, 1))
+    )
     ls = init_loop(ctl, data)
     rng = np.random.default_rng(0)
     # u ~ U(-20, 20) N and U(-5, 5) N·m per env, held for the run
-    u = jp.asarray(np.concatenate([rng.uniform(-20, 20, (_BATCH, 3)),
-                                   rng.uniform(-5, 5, (_BATCH, 3))], axis=1), jp.float32)
+    u = jp.asarray(
+        np.concatenate(
+            [rng.uniform(-20, 20, (_BATCH, 3)), rng.uniform(-5, 5, (_BATCH, 3))], axis=1
+        ),
+        jp.float32,
+    )
     command = jp.array([0.4, 0.0, 0.3])
 
     def run(cs, d, uu):
@@ -51,8 +56,18 @@ def recorded():
 
 def _osqp(P, q, G, h):
     solver = osqp.OSQP()
-    solver.setup(sp.csc_matrix(np.triu(P)), q, sp.csc_matrix(G), -np.inf * np.ones_like(h), h,
-                 eps_abs=1e-9, eps_rel=1e-9, polishing=True, verbose=False, max_iter=200000)
+    solver.setup(
+        sp.csc_matrix(np.triu(P)),
+        q,
+        sp.csc_matrix(G),
+        -np.inf * np.ones_like(h),
+        h,
+        eps_abs=1e-9,
+        eps_rel=1e-9,
+        polishing=True,
+        verbose=False,
+        max_iter=200000,
+    )
     return solver.solve(raise_error=False).x
 
 
@@ -63,8 +78,12 @@ def test_solver_matches_osqp_on_recorded_controller_qps(recorded):
     x = np.asarray(res.x, np.float64)
     gaps, viols = [], []
     for i in range(P.shape[0]):
-        xr = _osqp(P[i].astype(np.float64), q[i].astype(np.float64), G[i].astype(np.float64),
-                   h[i].astype(np.float64))
+        xr = _osqp(
+            P[i].astype(np.float64),
+            q[i].astype(np.float64),
+            G[i].astype(np.float64),
+            h[i].astype(np.float64),
+        )
         obj = 0.5 * x[i] @ P[i] @ x[i] + q[i] @ x[i]
         ref = 0.5 * xr @ P[i] @ xr + q[i] @ xr
         gaps.append(abs(obj - ref) / max(1.0, abs(ref)))

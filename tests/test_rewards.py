@@ -11,8 +11,9 @@ _TOL = 1e-6
 
 
 def test_perfect_tracking_gets_the_maximum():
-    out = rewards.total_reward(jp.array([0.3, 0.0, 0.5]), jp.array([0.3, 0.0, 0.5]),
-                               jp.zeros(2), jp.zeros(2))
+    out = rewards.total_reward(
+        jp.array([0.3, 0.0, 0.5]), jp.array([0.3, 0.0, 0.5]), jp.zeros(2), jp.zeros(2)
+    )
     assert float(out["r_vel"]) == pytest.approx(3.0, abs=_TOL)
     assert float(out["r_orn"]) == pytest.approx(2.0, abs=_TOL)
     assert float(out["r_total"]) == pytest.approx(0.34, abs=_TOL)
@@ -31,7 +32,9 @@ def test_terms_follow_the_formulas():
 
 
 def test_batched_input_reduces_the_last_axis():
-    out = rewards.total_reward(jp.zeros((5, 3)), jp.ones((5, 3)), jp.zeros((5, 2)), jp.zeros((5, 2)))
+    out = rewards.total_reward(
+        jp.zeros((5, 3)), jp.ones((5, 3)), jp.zeros((5, 2)), jp.zeros((5, 2))
+    )
     assert out["r_total"].shape == (5,)
     assert float(out["r_vel"][0]) == pytest.approx(3 * math.exp(-8), abs=_TOL)
 

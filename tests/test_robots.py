@@ -70,7 +70,7 @@ def test_arm_and_gripper_masses_match_spec(name):
 
 @pytest.mark.parametrize("name", [n for n in sorted(VARIANTS) if n != "none"])
 def test_mount_sensor_reads_arm_weight_when_standing(name):
-    """Standing still on leg servos, arms at home: the arm pushes down on the trunk by its weight."""
+    """Standing on leg servos, arms at home: the arm pushes down on the trunk by its weight."""
     model = with_leg_servos(build(name))
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
@@ -157,8 +157,17 @@ def test_committed_mjcf_is_what_the_code_generates(name):
 def test_mjcf_scene_loads_to_the_built_model(name):
     from_file = mujoco.MjModel.from_xml_path(str(_MJCF_DIR / scene_filename(name)))
     built = build(name)
-    for field in ("body_mass", "body_pos", "body_inertia", "geom_size", "jnt_range",
-                  "actuator_gainprm", "actuator_biasprm", "key_qpos", "geom_contype"):
+    for field in (
+        "body_mass",
+        "body_pos",
+        "body_inertia",
+        "geom_size",
+        "jnt_range",
+        "actuator_gainprm",
+        "actuator_biasprm",
+        "key_qpos",
+        "geom_contype",
+    ):
         np.testing.assert_allclose(
             getattr(from_file, field), getattr(built, field), atol=_XML_ROUNDTRIP_TOL, err_msg=field
         )

@@ -176,8 +176,11 @@ def run_locomotion(
     n_chunks = max(1, round(seconds / model.opt.timestep / chunk_ticks))
     rows = []
     for i, command in enumerate(commands):
-        data = sim.batched_data(mx, perturbed_home(model, n_envs, seed=seed + i),
-                                np.tile(model.key_ctrl[0], (n_envs, 1)))
+        data = sim.batched_data(
+            mx,
+            perturbed_home(model, n_envs, seed=seed + i),
+            np.tile(model.key_ctrl[0], (n_envs, 1)),
+        )
         ls = init_loop(controller, data)
         cmd = jp.tile(jp.asarray(command, jp.float32), (n_envs, 1))
         zeros = jp.zeros((n_envs, 6))
@@ -188,8 +191,11 @@ def run_locomotion(
         for k in range(1, n_chunks):
             ls = chunk(ls, cmd, zeros, zeros)
             if k % 10 == 0:
-                print(f"  {variant} {gait_name} {kind} cmd={tuple(command)}: "
-                      f"{k * chunk_ticks * model.opt.timestep:.0f}/{seconds:.0f} s", flush=True)
+                print(
+                    f"  {variant} {gait_name} {kind} cmd={tuple(command)}: "
+                    f"{k * chunk_ticks * model.opt.timestep:.0f}/{seconds:.0f} s",
+                    flush=True,
+                )
         jax.block_until_ready(ls)
         run = time.perf_counter() - t0
         row = summarize(ls.metrics)

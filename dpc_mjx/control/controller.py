@@ -88,8 +88,13 @@ class LowLevelController:
     def init(self, d) -> ControllerState:
         s = read_state(self.idx, d)
         zero = jp.zeros(balance.N_VARS)
-        warm = qp.solve(jp.eye(balance.N_VARS), zero, jp.zeros((balance.N_ROWS, balance.N_VARS)),
-                        jp.ones(balance.N_ROWS), settings=qp.QPSettings(iterations=1))
+        warm = qp.solve(
+            jp.eye(balance.N_VARS),
+            zero,
+            jp.zeros((balance.N_ROWS, balance.N_VARS)),
+            jp.ones(balance.N_ROWS),
+            settings=qp.QPSettings(iterations=1),
+        )
         return ControllerState(
             t=jp.zeros(()),
             pos_des=s.com_pos.at[2].set(self.config.body_height),
@@ -118,13 +123,29 @@ class LowLevelController:
         s = p.state
         contact_points = s.foot_pos.at[:, 2].add(-FOOT_RADIUS)  # forces act at the ground
         return balance.build_balance_qp(
-            self.config.balance, s.com_pos, s.com_vel, s.rot, s.ang_vel, p.pos_des, p.vel_des,
-            rot_z(p.yaw_des), jp.array([0.0, 0.0, p.yaw_rate_des]), contact_points, p.stance,
-            u[:3], u[3:],
+            self.config.balance,
+            s.com_pos,
+            s.com_vel,
+            s.rot,
+            s.ang_vel,
+            p.pos_des,
+            p.vel_des,
+            rot_z(p.yaw_des),
+            jp.array([0.0, 0.0, p.yaw_rate_des]),
+            contact_points,
+            p.stance,
+            u[:3],
+            u[3:],
         )
 
-    def step(self, cs: ControllerState, d, command: jax.Array, u: jax.Array,
-             arm_targets: jax.Array | None = None) -> tuple[ControllerState, jax.Array]:
+    def step(
+        self,
+        cs: ControllerState,
+        d,
+        command: jax.Array,
+        u: jax.Array,
+        arm_targets: jax.Array | None = None,
+    ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM.
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
@@ -138,12 +159,21 @@ class LowLevelController:
         # Swing feet: record lift-off, track a trajectory to the Raibert foothold.
         lift_off = cs.stance & ~stance
         swing_start = jp.where(lift_off[:, None], s.foot_pos, cs.swing_start)
-        target = swing.raibert_foothold(s.hip_pos, s.com_vel, vel_des, command[2], s.com_pos,
-                                        cfg.gait.stance_time, cfg.raibert_k)
-        p_des, v_des = swing.swing_trajectory(swing_start, target, progress, cfg.gait.swing_time,
-                                              cfg.swing_height)
-        f_swing = swing.swing_force(p_des, v_des, s.foot_pos, s.foot_vel, cfg.swing_kp,
-                                    cfg.swing_kd)
+        target = swing.raibert_foothold(
+            s.hip_pos,
+            s.com_vel,
+            vel_des,
+            command[2],
+            s.com_pos,
+            cfg.gait.stance_time,
+            cfg.raibert_k,
+        )
+        p_des, v_des = swing.swing_trajectory(
+            swing_start, target, progress, cfg.gait.swing_time, cfg.swing_height
+        )
+        f_swing = swing.swing_force(
+            p_des, v_des, s.foot_pos, s.foot_vel, cfg.swing_kp, cfg.swing_kd
+        )
 
         # Stance legs push the ground with -f (so the ground pushes back with f); swing legs
         # apply the PD force: tau = J^T f per leg.
@@ -155,13 +185,21 @@ class LowLevelController:
         if self.lay.arms:
             targets = self.arm_home if arm_targets is None else arm_targets
             ctrl = ctrl.at[self.lay.arm_act].set(targets)
-        new = ControllerState(t=cs.t + self.dt, pos_des=p.pos_des, yaw_des=p.yaw_des,
-                              swing_start=swing_start, stance=stance, qp=res, forces=forces)
+        new = ControllerState(
+            t=cs.t + self.dt,
+            pos_des=p.pos_des,
+            yaw_des=p.yaw_des,
+            swing_start=swing_start,
+            stance=stance,
+            qp=res,
+            forces=forces,
+        )
         return new, ctrl
 
 
-def make_controller(model: mujoco.MjModel, config: ControllerConfig | None = None,
-                    gait_: gait.Gait | None = None) -> LowLevelController:
+def make_controller(
+    model: mujoco.MjModel, config: ControllerConfig | None = None, gait_: gait.Gait | None = None
+) -> LowLevelController:
     """A controller for a compiled variant. The balance model is the bare A1 (see module doc)."""
     lay = layout(model)
     idx = state_index(model, lay)
@@ -170,8 +208,9 @@ def make_controller(model: mujoco.MjModel, config: ControllerConfig | None = Non
         params = dataclasses.replace(params, inertia=jp.asarray(idx.a1_inertia, jp.float32))
         config = ControllerConfig(balance=params, gait=gait_ or gait.trot())
     arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)
-    return LowLevelController(idx=idx, lay=lay, dt=float(model.opt.timestep), config=config,
-                              arm_home=arm_home)
+    return LowLevelController(
+        idx=idx, lay=lay, dt=float(model.opt.timestep), config=config, arm_home=arm_home
+    )
 
 
 def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
@@ -186,5 +225,11 @@ def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
     return jp.concatenate([f_a, tau_a])
 
 
-__all__ = ["BodyState", "ControllerConfig", "ControllerState", "LowLevelController",
-           "make_controller", "oracle_u"]
+__all__ = [
+    "BodyState",
+    "ControllerConfig",
+    "ControllerState",
+    "LowLevelController",
+    "make_controller",
+    "oracle_u",
+]

@@ -49,7 +49,9 @@ def a1_spec() -> mujoco.MjSpec:
 
     for leg in LEGS:
         foot = spec.body(f"{leg}_foot")
-        foot.add_site(name=f"{leg}_foot", pos=[0, 0, 0], size=[0.005, 0, 0], group=VISUAL_GROUP_SITES)
+        foot.add_site(
+            name=f"{leg}_foot", pos=[0, 0, 0], size=[0.005, 0, 0], group=VISUAL_GROUP_SITES
+        )
         sphere = next(g for g in foot.geoms if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)
         sphere.name = f"{leg}_foot"
         sphere.contype, sphere.conaffinity = FOOT_CONTYPE, FOOT_CONAFFINITY

@@ -53,7 +53,8 @@ class Mount:
             if abs(v) > half + 1e-9:
                 raise DpcError(
                     f"{what}: pos {axis}={v:.3f} m is outside the A1 trunk (|{axis}| <= {half} m); "
-                    f"mount the arm on the trunk, e.g. on its top face z={a1.TRUNK_HALF_EXTENTS[2]}."
+                    f"mount the arm on the trunk, e.g. on its top face "
+                    f"z={a1.TRUNK_HALF_EXTENTS[2]}."
                 )
 
 
@@ -241,18 +242,30 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
 
     base = spec.worldbody.add_body(name="base")
     base.fuse = 0  # keep the welded base apart from the trunk: the mount sensors live in it
-    _set_inertia(base, arm.base_mass, (0, 0, BASE_HEIGHT / 2), rod_inertia(arm.base_mass, BASE_HEIGHT, 0.04, 2))
+    _set_inertia(
+        base,
+        arm.base_mass,
+        (0, 0, BASE_HEIGHT / 2),
+        rod_inertia(arm.base_mass, BASE_HEIGHT, 0.04, 2),
+    )
     base.add_geom(type=cyl, size=[0.04, BASE_HEIGHT / 2, 0], pos=[0, 0, BASE_HEIGHT / 2], rgba=rgba)
     _add_mount_sensors(spec, base)
 
     turret = base.add_body(name="turret", pos=[0, 0, BASE_HEIGHT])
     turret_h = arm.shoulder_height - BASE_HEIGHT
-    _set_inertia(turret, arm.turret_mass, (0, 0, turret_h / 2), rod_inertia(arm.turret_mass, turret_h, 0.03, 2))
+    _set_inertia(
+        turret,
+        arm.turret_mass,
+        (0, 0, turret_h / 2),
+        rod_inertia(arm.turret_mass, turret_h, 0.03, 2),
+    )
     turret.add_geom(type=cyl, size=[0.03, turret_h / 2, 0], pos=[0, 0, turret_h / 2], rgba=rgba)
 
     upper = turret.add_body(name="upper_arm", pos=[0, 0, turret_h])
     L1 = arm.upper_arm_length
-    _set_inertia(upper, arm.upper_arm_mass, (0, 0, L1 / 2), rod_inertia(arm.upper_arm_mass, L1, r, 2))
+    _set_inertia(
+        upper, arm.upper_arm_mass, (0, 0, L1 / 2), rod_inertia(arm.upper_arm_mass, L1, r, 2)
+    )
     upper.add_geom(name="upper_arm", type=capsule, size=[r, 0, 0], fromto=[0, 0, 0, 0, 0, L1])
 
     fore = upper.add_body(name="forearm", pos=[0, 0, L1])
@@ -273,8 +286,12 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     gripper.add_geom(type=box, size=list(palm_half), pos=[palm_half[0], 0, 0], rgba=rgba)
     jaw_half = (FINGER_LENGTH / 2, 0.004, 0.012)
     gripper.add_geom(type=box, size=list(jaw_half), pos=[PALM_LENGTH + jaw_half[0], -0.026, 0])
-    gripper.add_site(name=EE_SITE, pos=[PALM_LENGTH + FINGER_LENGTH, 0, 0], size=[0.01, 0, 0],
-                     group=a1.VISUAL_GROUP_SITES)
+    gripper.add_site(
+        name=EE_SITE,
+        pos=[PALM_LENGTH + FINGER_LENGTH, 0, 0],
+        size=[0.01, 0, 0],
+        group=a1.VISUAL_GROUP_SITES,
+    )
 
     finger = gripper.add_body(name="finger", pos=[PALM_LENGTH, 0.026, 0])
     finger_mass = FINGER_MASS_FRACTION * arm.gripper_mass
@@ -289,8 +306,14 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
         (finger, "gripper", [0, -1, 0]),  # positive closes the finger onto the fixed jaw
     ):
         kind = mujoco.mjtJoint.mjJNT_SLIDE if name == "gripper" else mujoco.mjtJoint.mjJNT_HINGE
-        body.add_joint(name=name, type=kind, axis=axis, range=list(WIDOWX_RANGES[name]),
-                       armature=ARM_ARMATURE, damping=[ARM_DAMPING, 0, 0])
+        body.add_joint(
+            name=name,
+            type=kind,
+            axis=axis,
+            range=list(WIDOWX_RANGES[name]),
+            armature=ARM_ARMATURE,
+            damping=[ARM_DAMPING, 0, 0],
+        )
         _add_servo(spec, name, WIDOWX_SERVOS[name])
 
     for geom in spec.geoms:
@@ -305,15 +328,17 @@ def _urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
     root = spec.body(info.root)
     root.fuse = 0  # keep the root body apart from the trunk: the mount sensors live in it
     _add_mount_sensors(spec, root)
-    spec.body(info.ee_body).add_site(name=EE_SITE, pos=list(info.ee_offset), size=[0.01, 0, 0],
-                                     group=a1.VISUAL_GROUP_SITES)
+    spec.body(info.ee_body).add_site(
+        name=EE_SITE, pos=list(info.ee_offset), size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES
+    )
     # Capsules between successive joint origins, so the arm is visible without its meshes.
     for body in spec.bodies:
         if body.name in ("world", info.root):
             continue
         if np.linalg.norm(body.pos) > 1e-3:
-            body.parent.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[0.012, 0, 0],
-                                 fromto=[0, 0, 0, *body.pos])
+            body.parent.add_geom(
+                type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[0.012, 0, 0], fromto=[0, 0, 0, *body.pos]
+            )
     for joint in spec.joints:
         joint.armature = ARM_ARMATURE
         joint.damping = [max(joint.damping[0], ARM_DAMPING), 0, 0]

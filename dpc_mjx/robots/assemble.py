@@ -56,20 +56,38 @@ def add_scene(spec: mujoco.MjSpec) -> mujoco.MjSpec:
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     spec.visual.global_.azimuth = 120
     spec.visual.global_.elevation = -20
-    spec.add_texture(name="skybox", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
-                     builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT, rgb1=[0.3, 0.5, 0.7],
-                     rgb2=[0, 0, 0], width=512, height=3072)
-    spec.add_texture(name="groundplane", type=mujoco.mjtTexture.mjTEXTURE_2D,
-                     builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.2, 0.3, 0.4],
-                     rgb2=[0.1, 0.2, 0.3], mark=mujoco.mjtMark.mjMARK_EDGE, markrgb=[0.8, 0.8, 0.8],
-                     width=300, height=300)
+    spec.add_texture(
+        name="skybox",
+        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+        rgb1=[0.3, 0.5, 0.7],
+        rgb2=[0, 0, 0],
+        width=512,
+        height=3072,
+    )
+    spec.add_texture(
+        name="groundplane",
+        type=mujoco.mjtTexture.mjTEXTURE_2D,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.2, 0.3, 0.4],
+        rgb2=[0.1, 0.2, 0.3],
+        mark=mujoco.mjtMark.mjMARK_EDGE,
+        markrgb=[0.8, 0.8, 0.8],
+        width=300,
+        height=300,
+    )
     mat = spec.add_material(name="groundplane", texrepeat=[5, 5], texuniform=True, reflectance=0.2)
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "groundplane"
     world = spec.worldbody
     world.add_light(pos=[0, 0, 1.5], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05],
-                   material="groundplane", contype=a1.FLOOR_CONTYPE,
-                   conaffinity=a1.FLOOR_CONAFFINITY)
+    world.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 0.05],
+        material="groundplane",
+        contype=a1.FLOOR_CONTYPE,
+        conaffinity=a1.FLOOR_CONAFFINITY,
+    )
     return spec
 
 

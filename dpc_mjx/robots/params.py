@@ -76,7 +76,7 @@ def _chain(model: mujoco.MjModel, body: int) -> np.ndarray:
 def arm_param_fields(
     mx: mjx.Model, idx: ArmParamIndex, upper_arm_length: jax.Array, gripper_mass: jax.Array
 ) -> dict[str, jax.Array]:
-    """Model fields (unbatched) for one arm with the given upper-arm length (m) and gripper mass (kg).
+    """Model fields (unbatched) of one arm with upper-arm length (m) and gripper mass (kg).
 
     The gripper mass is split between palm and finger in the compiled ratio, each inertia scaled
     with its mass; the upper arm keeps its mass and radius, its inertia follows the rod formula the

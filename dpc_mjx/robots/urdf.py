@@ -2,8 +2,8 @@
 
 The wheel's visual meshes are COLLADA (.dae), which MuJoCo cannot read, and mesh collision shapes
 are costly in MJX. We therefore drop every <visual> element and every mesh collision shape, and keep
-the URDF's primitive collision shapes (boxes, cylinders, spheres) as *visual-only* geoms, so the model
-still renders as a recognisable robot. The inertial properties come from the URDF unchanged.
+the URDF's primitive collision shapes (boxes, cylinders, spheres) as *visual-only* geoms, so the
+model still renders as a recognisable robot. The inertial properties come from the URDF unchanged.
 """
 
 from __future__ import annotations

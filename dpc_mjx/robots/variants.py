@@ -24,14 +24,19 @@ class RobotSpec:
 
     def validate(self) -> None:
         if not isinstance(self.arms, tuple):
-            raise DpcError(f"{self.name}: arms must be a tuple of ArmSpec/UrdfArm, got {self.arms!r}.")
+            raise DpcError(
+                f"{self.name}: arms must be a tuple of ArmSpec/UrdfArm, got {self.arms!r}."
+            )
         if len(self.arms) > MAX_ARMS:
             raise DpcError(
-                f"{self.name}: {len(self.arms)} arms given, the A1 trunk carries at most {MAX_ARMS}."
+                f"{self.name}: {len(self.arms)} arms given, the A1 trunk carries at most "
+                f"{MAX_ARMS}."
             )
         for i, arm in enumerate(self.arms):
             if not isinstance(arm, (ArmSpec, UrdfArm)):
-                raise DpcError(f"{self.name}: arm {i} is a {type(arm).__name__}, not ArmSpec/UrdfArm.")
+                raise DpcError(
+                    f"{self.name}: arm {i} is a {type(arm).__name__}, not ArmSpec/UrdfArm."
+                )
             arm.validate(f"{self.name}.arms[{i}]")
         if len(self.arms) == 2:
             gap = math.dist(self.arms[0].mount.pos, self.arms[1].mount.pos)
@@ -78,7 +83,8 @@ def resolve(robot: str | Arm | RobotSpec) -> RobotSpec:
         spec = robot
     else:
         raise DpcError(
-            f"Expected a variant name, an ArmSpec/UrdfArm or a RobotSpec, got {type(robot).__name__}."
+            f"Expected a variant name, an ArmSpec/UrdfArm or a RobotSpec, "
+            f"got {type(robot).__name__}."
         )
     spec.validate()
     return spec
