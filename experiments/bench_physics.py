@@ -72,23 +72,31 @@ def mjx_rate(model, batch, calls):
 
 def physics_table(variants, batches, calls):
     print(
-        "| variant | engine | batch/threads | compile (s) | env-steps/s | ratio to native 1 core |"
+        "| variant | engine | batch/threads | compile (s) | env-steps/s "
+        "| ratio to native 1 thread | ratio to native 2 threads |"
     )
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     for name in variants:
         model = with_leg_servos(build(name))
         loop = native_loop(model)
         base, _ = native_rollout(model, 1)
         two, _ = native_rollout(model, 2)
-        print(
-            f"| {name} | MuJoCo C, Python mj_step loop | 1 | - | {loop:,.0f} | {loop / base:.2f} |"
-        )
-        print(f"| {name} | MuJoCo C, rollout | 1 thread | - | {base:,.0f} | 1.00 |")
-        print(f"| {name} | MuJoCo C, rollout | 2 threads | - | {two:,.0f} | {two / base:.2f} |")
+        rows = [
+            ("MuJoCo C, Python mj_step loop", "1", "-", loop),
+            ("MuJoCo C, rollout", "1 thread", "-", base),
+            ("MuJoCo C, rollout", "2 threads", "-", two),
+        ]
+        for engine, size, comp, rate in rows:
+            print(
+                f"| {name} | {engine} | {size} | {comp} | {rate:,.0f} "
+                f"| {rate / base:.2f} | {rate / two:.2f} |",
+                flush=True,
+            )
         for b in batches:
             rate, comp, _ = mjx_rate(model, b, calls)
             print(
-                f"| {name} | MJX jit(vmap) | {b} | {comp:.1f} | {rate:,.0f} | {rate / base:.2f} |",
+                f"| {name} | MJX jit(vmap) | {b} | {comp:.1f} | {rate:,.0f} "
+                f"| {rate / base:.2f} | {rate / two:.2f} |",
                 flush=True,
             )
 

@@ -1,4 +1,4 @@
-"""The balance QP of the whole-body controller (paper eqs. 5-10, corrected), built apart from solving.
+"""The balance QP of the whole-body controller (paper eqs. 5-10, corrected), apart from its solver.
 
 Frames and units: every vector is in the world frame (z up, m, m/s, rad/s, N, N·m) unless named
 otherwise; `rot` matrices map body-frame vectors to the world frame.
@@ -32,10 +32,13 @@ Constraints (6 rows per foot, fixed size 24 for every env; `G f <= h`), for a st
 
     f_min <= f_z <= f_max,   |f_x| <= mu f_z,   |f_y| <= mu f_z      (the friction pyramid)
 
-The paper's printed pyramid inequality is misprinted; this is the standard one. A swing foot gets
-the same rows with f_min = f_max = 0, which forces f_i = 0 (0 <= f_z <= 0, |f_x|, |f_y| <= 0), and
-its columns of M are zeroed so that a not-quite-zero swing force from an inexact solve cannot leak
-into the stance feet through the cost (the exact optimum is unchanged since f_i = 0 there).
+The paper's printed pyramid inequality is misprinted; this is the standard one. A swing foot
+must carry no force. Its columns of M are zeroed, so its only cost is R |f_i|^2, and its rows become
+the symmetric box |f_x|, |f_y|, |f_z| <= f_max: then f_i = 0 is the exact optimum, the stance
+solution is exactly that of the stance-only problem, and the feasible set keeps an interior. (Tight
+bounds 0 <= f_z <= 0, |f_x|, |f_y| <= 0 give the same optimum but an empty interior, on which an
+interior-point method converges more slowly and with exploding duals; the solver still handles
+them, see tests.) `solve_balance` also multiplies the forces by the contact mask.
 """
 
 from __future__ import annotations
@@ -45,8 +48,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jp
+import numpy as np
 
 from dpc_mjx.control import qp
+from dpc_mjx.errors import DpcError
 
 GRAVITY = 9.81  # m/s^2
 N_FEET = 4
@@ -82,32 +87,42 @@ class BalanceParams:
     R: jax.Array
 
 
-def default_params(
-    mass: float = 13.5,
-    inertia: tuple[float, float, float] = (0.07, 0.26, 0.24),
-    mu: float = 0.6,
-    f_min: float = 5.0,
-    f_max: float = 180.0,
-    kp: tuple[float, ...] = (50.0, 50.0, 100.0, 300.0, 300.0, 100.0),
-    kd: tuple[float, ...] = (10.0, 10.0, 20.0, 30.0, 30.0, 20.0),
-    Q: tuple[float, ...] = (1.0, 1.0, 1.0, 10.0, 10.0, 1.0),
-    R: float = 1e-4,
-) -> BalanceParams:
-    """Defaults for an A1 (12.5 kg) with a ~1 kg arm; `inertia` is a whole-body diagonal (kg m^2).
+DEFAULTS: dict[str, float | tuple[float, ...]] = dict(
+    mass=13.5,  # kg: A1 12.5 kg + ~1 kg arm
+    inertia=(0.07, 0.26, 0.24),  # kg m^2, whole-body diagonal about the COM
+    mu=0.6,
+    f_min=5.0,  # N
+    f_max=180.0,  # N, ~1.4 x the weight on one foot
+    kp=(50.0, 50.0, 100.0, 300.0, 300.0, 100.0),  # 1/s^2: x, y, z, roll, pitch, yaw
+    kd=(10.0, 10.0, 20.0, 30.0, 30.0, 20.0),  # 1/s (damping ratios 0.7 .. 1)
+    Q=(1.0, 1.0, 1.0, 10.0, 10.0, 1.0),
+    R=1e-4,  # (m/s^2 / N)^2, scalar or (12,)
+)
 
-    R = 1e-5 (m/s^2/N)^2 regularises the forces: it lowers the standing support force by the
-    factor 1 / (1 + R m^2 / 4) ~ 0.05 %, and with Q it makes P positive definite (cond ~ 1e7).
+
+def default_params(**overrides: float | tuple[float, ...] | jax.Array) -> BalanceParams:
+    """BalanceParams from DEFAULTS (an A1 with a ~1 kg arm), with fields overridden by name.
+
+    `inertia` may be a diagonal (3,) or a matrix (3, 3); `R` a scalar or (12,).
+    R = 1e-4 regularises the forces (it spreads them, and makes P positive definite): it lowers
+    the support force by the factor 1 / (1 + R m^2 / (n_stance Q_z)), 0.5 % on four feet, 0.9 % on
+    two, i.e. a steady sag of < 1 mm with kp_z = 100.
     """
+    unknown = set(overrides) - set(DEFAULTS)
+    if unknown:
+        raise DpcError(f"Unknown balance parameter(s) {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+    v = {**DEFAULTS, **overrides}
+    inertia = jp.asarray(v["inertia"], jp.float32)
     return BalanceParams(
-        mass=jp.asarray(mass, jp.float32),
-        inertia=jp.diag(jp.asarray(inertia, jp.float32)),
-        mu=jp.asarray(mu, jp.float32),
-        f_min=jp.asarray(f_min, jp.float32),
-        f_max=jp.asarray(f_max, jp.float32),
-        kp=jp.asarray(kp, jp.float32),
-        kd=jp.asarray(kd, jp.float32),
-        Q=jp.asarray(Q, jp.float32),
-        R=jp.broadcast_to(jp.asarray(R, jp.float32), (N_VARS,)),
+        mass=jp.asarray(v["mass"], jp.float32),
+        inertia=jp.diag(inertia) if inertia.ndim == 1 else inertia,
+        mu=jp.asarray(v["mu"], jp.float32),
+        f_min=jp.asarray(v["f_min"], jp.float32),
+        f_max=jp.asarray(v["f_max"], jp.float32),
+        kp=jp.asarray(v["kp"], jp.float32),
+        kd=jp.asarray(v["kd"], jp.float32),
+        Q=jp.asarray(v["Q"], jp.float32),
+        R=jp.broadcast_to(jp.asarray(v["R"], jp.float32), (N_VARS,)),
     )
 
 
@@ -143,16 +158,17 @@ def rotvec_from_matrix(rot: jax.Array) -> jax.Array:
     Via the quaternion (Shepperd's branch choice, the largest of w, x, y, z computed from the
     diagonal) so that angles near 0 and near pi are both accurate: theta = 2 atan2(|v|, w), w >= 0.
     """
-    rot = jp.nan_to_num(rot)
-    r = rot
+    r = jp.nan_to_num(rot)
     tr = r[0, 0] + r[1, 1] + r[2, 2]
     # Four candidate (unnormalised) quaternions (w, x, y, z) * 4 * component; pick the stable one.
+    sx, sy, sz = r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]  # 4 w (x, y, z)
+    pxy, pxz, pyz = r[0, 1] + r[1, 0], r[0, 2] + r[2, 0], r[1, 2] + r[2, 1]
     cand = jp.stack(
         [
-            jp.stack([1 + tr, r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]),
-            jp.stack([r[2, 1] - r[1, 2], 1 + 2 * r[0, 0] - tr, r[0, 1] + r[1, 0], r[0, 2] + r[2, 0]]),
-            jp.stack([r[0, 2] - r[2, 0], r[0, 1] + r[1, 0], 1 + 2 * r[1, 1] - tr, r[1, 2] + r[2, 1]]),
-            jp.stack([r[1, 0] - r[0, 1], r[0, 2] + r[2, 0], r[1, 2] + r[2, 1], 1 + 2 * r[2, 2] - tr]),
+            jp.stack([1 + tr, sx, sy, sz]),
+            jp.stack([sx, 1 + 2 * r[0, 0] - tr, pxy, pxz]),
+            jp.stack([sy, pxy, 1 + 2 * r[1, 1] - tr, pyz]),
+            jp.stack([sz, pxz, pyz, 1 + 2 * r[2, 2] - tr]),
         ]
     )
     diag = jp.stack([tr, r[0, 0], r[1, 1], r[2, 2]])
@@ -175,29 +191,35 @@ def yaw_rotation(rot: jax.Array) -> jax.Array:
 def friction_constraints(
     mu: jax.Array, f_min: jax.Array, f_max: jax.Array, contact: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
-    """G (24, 12), h (24,) of the friction pyramids; a swing foot (contact False) gets f_i = 0.
+    """G (24, 12), h (24,) of the friction pyramids (stance) and the swing boxes.
 
-    Rows of foot i (variables f_i = (fx, fy, fz)):  fz <= fmax,  -fz <= -fmin,
+    Rows of a stance foot i (variables f_i = (fx, fy, fz)):  fz <= f_max,  -fz <= -f_min,
     fx - mu fz <= 0,  -fx - mu fz <= 0,  fy - mu fz <= 0,  -fy - mu fz <= 0.
+    A swing foot gets the symmetric box |fx|, |fy|, |fz| <= f_max instead (mu -> 0 in the rows).
+    With its columns of M zeroed its only cost is R |f_i|^2, so f_i = 0 exactly at the optimum,
+    and, unlike tight bounds 0 <= fz <= 0, the box leaves the feasible set an interior (see the
+    module doc).
     """
-    one, zero = jp.ones_like(mu), jp.zeros_like(mu)
-    block = jp.stack(
-        [
-            jp.stack([zero, zero, one]),
-            jp.stack([zero, zero, -one]),
-            jp.stack([one, zero, -mu]),
-            jp.stack([-one, zero, -mu]),
-            jp.stack([zero, one, -mu]),
-            jp.stack([zero, -one, -mu]),
-        ]
-    )  # (6, 3)
-    G = jp.kron(jp.eye(N_FEET, dtype=block.dtype), block)  # (24, 12) block diagonal
-    c = contact.astype(block.dtype)  # (4,)
-    h_foot = jp.stack([f_max * c, -f_min * c, zero * c, zero * c, zero * c, zero * c], -1)
-    return G, h_foot.reshape(N_ROWS)
+    c = contact.astype(mu.dtype)  # (4,)
+    one, zero = jp.ones_like(c), jp.zeros_like(c)
+    mu_i = mu * c  # (4,)
+    rows = [  # each (4, 3): the row of foot i acting on (fx, fy, fz)
+        jp.stack([zero, zero, one], -1),
+        jp.stack([zero, zero, -one], -1),
+        jp.stack([one, zero, -mu_i], -1),
+        jp.stack([-one, zero, -mu_i], -1),
+        jp.stack([zero, one, -mu_i], -1),
+        jp.stack([zero, -one, -mu_i], -1),
+    ]
+    block = jp.stack(rows, axis=1)  # (4, 6, 3)
+    eye = jp.eye(N_FEET, dtype=mu.dtype)
+    G = (eye[:, None, :, None] * block[:, :, None, :]).reshape(N_ROWS, N_VARS)  # block diagonal
+    swing_box = f_max * (1.0 - c)
+    h = jp.stack([f_max * one, -f_min * c + swing_box] + [swing_box] * 4, axis=-1)  # (4, 6)
+    return G, h.reshape(N_ROWS)
 
 
-def build_balance_qp(
+def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts, disturbance)
     params: BalanceParams,
     com_pos: jax.Array,
     com_vel: jax.Array,
@@ -250,7 +272,7 @@ def build_balance_qp(
     return BalanceQP(P=P, q=q, G=G, h=h, const=const, M=M, b=b, qdd_des=qdd_des)
 
 
-def solve_balance(
+def solve_balance(  # noqa: PLR0913, PLR0917 (build_balance_qp's arguments, solver options)
     params: BalanceParams,
     com_pos: jax.Array,
     com_vel: jax.Array,
@@ -264,14 +286,114 @@ def solve_balance(
     contact: jax.Array,
     f_a: jax.Array,
     tau_a: jax.Array,
+    *,
     warm_start: qp.QPResult | None = None,
     settings: qp.QPSettings | None = None,
 ) -> tuple[jax.Array, qp.QPResult]:
     """Build and solve the balance QP: foot forces (4, 3) (N, world; swing feet exactly 0)."""
     prob = build_balance_qp(
-        params, com_pos, com_vel, rot, ang_vel, com_pos_des, com_vel_des, rot_des, ang_vel_des,
-        foot_pos, contact, f_a, tau_a,
+        params,
+        com_pos,
+        com_vel,
+        rot,
+        ang_vel,
+        com_pos_des,
+        com_vel_des,
+        rot_des,
+        ang_vel_des,
+        foot_pos,
+        contact,
+        f_a,
+        tau_a,
     )
     res = qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=warm_start, settings=settings)
     forces = res.x.reshape(N_FEET, 3) * contact.astype(res.x.dtype)[:, None]
     return forces, res
+
+
+STAND_HEIGHT = 0.27  # m, COM height of the A1 standing
+STANCE_PATTERNS = np.array(
+    [[1, 1, 1, 1], [1, 0, 0, 1], [0, 1, 1, 0]], dtype=bool
+)  # stand, trot pair FR+RL, trot pair FL+RR (order FR, FL, RR, RL)
+
+
+def _rotation(axis_angle: np.ndarray) -> np.ndarray:
+    """Rodrigues: the rotation matrix (3, 3) of a rotation vector (3,)."""
+    angle = np.linalg.norm(axis_angle)
+    if angle == 0.0:
+        return np.eye(3)
+    k = skew_np(axis_angle / angle)
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def skew_np(v: np.ndarray) -> np.ndarray:
+    """[v]x (3, 3) in NumPy."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def sample_states(
+    rng: np.random.Generator,
+    n: int,
+    max_rot_err: float = 0.3,
+    max_f_a: float = 50.0,
+    max_tau_a: float = 15.0,
+) -> dict[str, jax.Array]:
+    """Random realistic inputs of `build_balance_qp` for n envs (for tests and benchmarks).
+
+    A1-like stance: feet near (+-0.18, +-0.13) m around the COM (3 cm noise) on the ground, COM at
+    STAND_HEIGHT (2 cm noise), any heading; orientation error up to `max_rot_err` rad about a random
+    axis; velocity errors ~0.3 m/s and ~1 rad/s; contact pattern stand or trot (diagonal pairs);
+    arm force |f_a| <= max_f_a N and torque |tau_a| <= max_tau_a N·m in random directions.
+    Returns a dict keyed by the argument names, arrays with a leading axis n.
+    """
+    nominal_feet = np.array([[0.18, -0.13], [0.18, 0.13], [-0.18, -0.13], [-0.18, 0.13]])
+    out: dict[str, list] = {k: [] for k in _STATE_KEYS}
+
+    def rand_dir(scale: float) -> np.ndarray:
+        v = rng.normal(size=3)
+        return v / np.linalg.norm(v) * rng.uniform(0.0, scale)
+
+    for _ in range(n):
+        yaw = rng.uniform(-np.pi, np.pi)
+        rot_des = _rotation(np.array([0.0, 0.0, yaw])) @ _rotation(rand_dir(0.1))
+        rot = _rotation(rand_dir(max_rot_err)) @ rot_des
+        com = np.array([0.0, 0.0, STAND_HEIGHT]) + rng.normal(size=3) * 0.02
+        feet_xy = (nominal_feet + rng.normal(size=(4, 2)) * 0.03) @ _rotation(
+            np.array([0.0, 0.0, yaw])
+        )[:2, :2].T
+        feet = np.concatenate([feet_xy + com[:2], np.zeros((4, 1))], axis=1)
+        values = dict(
+            com_pos=com,
+            com_vel=rng.normal(size=3) * 0.3,
+            rot=rot,
+            ang_vel=rng.normal(size=3) * 1.0,
+            com_pos_des=np.array([0.0, 0.0, STAND_HEIGHT]) + rng.normal(size=3) * 0.03,
+            com_vel_des=rng.normal(size=3) * 0.3,
+            rot_des=rot_des,
+            ang_vel_des=rng.normal(size=3) * 0.3,
+            foot_pos=feet,
+            contact=STANCE_PATTERNS[rng.integers(len(STANCE_PATTERNS))],
+            f_a=rand_dir(max_f_a),
+            tau_a=rand_dir(max_tau_a),
+        )
+        for k, v in values.items():
+            out[k].append(v)
+    return {
+        k: jp.asarray(np.array(v), bool if k == "contact" else jp.float32) for k, v in out.items()
+    }
+
+
+_STATE_KEYS = (
+    "com_pos",
+    "com_vel",
+    "rot",
+    "ang_vel",
+    "com_pos_des",
+    "com_vel_des",
+    "rot_des",
+    "ang_vel_des",
+    "foot_pos",
+    "contact",
+    "f_a",
+    "tau_a",
+)

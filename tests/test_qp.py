@@ -1,0 +1,268 @@
+"""dpc_mjx.control.qp: accuracy against OSQP (float64, tight), robustness, warm start, tracing.
+
+OSQP is a test-only reference. All our solves run in float32 with the DEFAULT settings, batched by
+one jit(vmap(solve)) per shape.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import osqp
+import pytest
+import scipy.sparse as sp
+
+from dpc_mjx.control import qp
+
+N_PROBLEMS = 600  # random QPs of the controller's size
+N_VARS, N_ROWS = 12, 24
+
+# Tolerances (float32 solver vs float64 reference). Scales: force scale = max(1, |h|_inf);
+# objective scale = max(1, |J*|); dual scale = max(1, |q|, |Px|, |G|'|z|) (all inf-norms).
+_OBJ_GAP_TOL = 1e-3  # |J - J*| / objective scale
+_VIOLATION_TOL = 1e-3  # max(Gx - h, 0) / force scale
+_STATIONARITY_TOL = 1e-3  # |Px + q + G'z| / dual scale
+_COMPLEMENTARITY_TOL = 1e-3  # max_i z_i |h - Gx|_i / objective scale
+_DUAL_FEASIBILITY_TOL = 0.0  # min z >= -tol (the method keeps z > 0)
+_CONVERGED_FRACTION = 0.99  # share of problems whose `converged` flag is set
+_TIGHT_PAIR_TOL = 1e-3  # |x| of the problem whose bounds pin x = 0
+_WARM_ITERATION_RATIO = 0.7  # mean iterations to tolerance, warm / cold
+
+
+def random_qps(n_prob: int, seed: int) -> tuple[np.ndarray, ...]:
+    """Feasible QPs with a known optimum built from the KKT conditions, float64.
+
+    A third are well conditioned (P = AA'/n + 0.1 I); two thirds are like the balance cost: a rank-6
+    Gram matrix with row scales over two decades plus a ridge of 1e-6..1e-4 of its mean eigenvalue.
+    0..10 of the 24 random rows are active at x*, with multipliers > 0; scales from 0.1 to 100.
+    """
+    rng = np.random.default_rng(seed)
+    P = np.zeros((n_prob, N_VARS, N_VARS))
+    q = np.zeros((n_prob, N_VARS))
+    G = np.zeros((n_prob, N_ROWS, N_VARS))
+    h = np.zeros((n_prob, N_ROWS))
+    for b in range(n_prob):
+        if b % 3 == 0:
+            A = rng.normal(size=(N_VARS, N_VARS))
+            Pb = A @ A.T / N_VARS + 0.1 * np.eye(N_VARS)
+        else:
+            A = rng.normal(size=(6, N_VARS)) * rng.uniform(0.1, 10.0, size=(6, 1))
+            Pb = A.T @ A
+            Pb += 10.0 ** rng.uniform(-6, -4) * np.trace(Pb) / N_VARS * np.eye(N_VARS)
+        Gb = rng.normal(size=(N_ROWS, N_VARS))
+        scale = 10.0 ** rng.uniform(-1, 2)
+        x_star = rng.normal(size=N_VARS) * scale
+        active = rng.permutation(N_ROWS)[: rng.integers(0, 11)]
+        slack = rng.uniform(0.05, 1.0, size=N_ROWS) * scale
+        slack[active] = 0.0
+        lam = np.zeros(N_ROWS)
+        lam[active] = rng.uniform(0.1, 2.0, size=active.size) * scale
+        P[b], G[b], h[b] = Pb, Gb, Gb @ x_star + slack
+        q[b] = -Pb @ x_star - Gb.T @ lam
+    return P, q, G, h
+
+
+def osqp_reference(P, q, G, h) -> tuple[np.ndarray, np.ndarray]:
+    """x* and J* of each problem by OSQP in float64 (eps 1e-9, polished)."""
+    xs, js = [], []
+    for Pb, qb, Gb, hb in zip(*(np.asarray(a, np.float64) for a in (P, q, G, h)), strict=True):
+        solver = osqp.OSQP()
+        solver.setup(
+            sp.csc_matrix(np.triu(Pb)),
+            qb,
+            sp.csc_matrix(Gb),
+            np.full(hb.shape, -np.inf),
+            hb,
+            eps_abs=1e-9,
+            eps_rel=1e-9,
+            polishing=True,
+            verbose=False,
+            max_iter=200_000,
+        )
+        res = solver.solve(raise_error=False)
+        assert res.info.status == "solved", res.info.status
+        xs.append(res.x)
+        js.append(res.info.obj_val)
+    return np.array(xs), np.array(js)
+
+
+def check_against_reference(res: qp.QPResult, problems, j_star) -> dict[str, float]:
+    """Assert the accuracy and KKT checks of a batch; problems = (P, q, G, h); returns the worst
+    figures."""
+    P, q, G, h = (np.asarray(a, np.float64) for a in problems)
+    x, z = np.asarray(res.x, np.float64), np.asarray(res.z, np.float64)
+    j = 0.5 * np.einsum("bi,bij,bj->b", x, P, x) + np.einsum("bi,bi->b", q, x)
+    obj_scale = np.maximum(1.0, np.abs(j_star))
+    force_scale = np.maximum(1.0, np.abs(h).max(1))
+    gx = np.einsum("bij,bj->bi", G, x)
+    px = np.einsum("bij,bj->bi", P, x)
+    stat = np.abs(px + q + np.einsum("bij,bi->bj", G, z)).max(1)
+    dual_scale = np.maximum.reduce(
+        [
+            np.ones(len(x)),
+            np.abs(q).max(1),
+            np.abs(px).max(1),
+            np.einsum("bij,bi->bj", np.abs(G), z).max(1),
+        ]
+    )
+    worst = {
+        "gap": float((np.abs(j - j_star) / obj_scale).max()),
+        "violation": float((np.maximum(gx - h, 0.0).max(1) / force_scale).max()),
+        "stationarity": float((stat / dual_scale).max()),
+        "complementarity": float(((z * np.abs(h - gx)).max(1) / obj_scale).max()),
+        "min_z": float(z.min()),
+    }
+    assert np.all(np.asarray(res.valid)), "every feasible problem must give valid=True"
+    assert np.all(np.isfinite(x)) and np.all(np.isfinite(z))
+    assert worst["gap"] <= _OBJ_GAP_TOL, worst
+    assert worst["violation"] <= _VIOLATION_TOL, worst
+    assert worst["stationarity"] <= _STATIONARITY_TOL, worst
+    assert worst["complementarity"] <= _COMPLEMENTARITY_TOL, worst
+    assert worst["min_z"] >= -_DUAL_FEASIBILITY_TOL, worst
+    assert np.mean(np.asarray(res.converged)) >= _CONVERGED_FRACTION, worst
+    return worst
+
+
+_TRACES: list[int] = []  # one entry per trace of _counted_solve (a Python side effect)
+
+
+def _counted_solve(P, q, G, h):
+    _TRACES.append(1)
+    return qp.solve(P, q, G, h)
+
+
+# Shared compiled batch solvers (default settings): one compile per batch shape.
+_solve_batch = jax.jit(jax.vmap(_counted_solve))
+_solve_batch_warm = jax.jit(jax.vmap(lambda P, q, G, h, w: qp.solve(P, q, G, h, warm_start=w)))
+
+
+@pytest.fixture(scope="module")
+def random_problems():
+    P, q, G, h = random_qps(N_PROBLEMS, seed=0)
+    _, j_star = osqp_reference(P, q, G, h)
+    return P, q, G, h, j_star
+
+
+def test_random_qps_match_osqp(random_problems):
+    P, q, G, h, j_star = random_problems
+    args = [jp.asarray(a, jp.float32) for a in (P, q, G, h)]
+    res = _solve_batch(*args)
+    assert res.x.dtype == jp.float32
+    check_against_reference(res, (P, q, G, h), j_star)
+
+
+def test_result_shapes_and_unbatched_call(random_problems):
+    P, q, G, h, _ = random_problems
+    res = jax.jit(qp.solve)(*(jp.asarray(a[0], jp.float32) for a in (P, q, G, h)))
+    n, m = N_VARS, N_ROWS
+    shapes = {f.name: getattr(res, f.name).shape for f in dataclasses.fields(res)}
+    assert shapes == {
+        "x": (n,),
+        "z": (m,),
+        "s": (m,),
+        "objective": (),
+        "primal_residual": (),
+        "dual_residual": (),
+        "gap": (),
+        "iterations": (),
+        "converged": (),
+        "valid": (),
+    }
+    assert res.iterations.dtype == jp.int32 and res.valid.dtype == jp.bool_
+    assert bool(res.valid) and bool(res.converged)
+    assert 0 <= int(res.iterations) <= qp.QPSettings().iterations
+
+
+def _degenerate_cases() -> dict[str, tuple[np.ndarray, ...]]:
+    n, m = N_VARS, N_ROWS
+    eye, zeros_g = np.eye(n), np.zeros((m, n))
+    box = np.concatenate([np.eye(n), -np.eye(n)])  # |x_i| <= 1
+    cases = {
+        "nan_P": (np.full((n, n), np.nan), np.ones(n), box, np.ones(m)),
+        "inf_h": (eye, np.ones(n), box, np.full(m, np.inf)),
+        "nan_G": (eye, np.ones(n), np.where(box > 0, np.nan, box), np.ones(m)),
+        "huge": (eye * 1e30, np.full(n, 1e30), box * 1e30, np.ones(m) * 1e30),
+        "all_zero": (np.zeros((n, n)), np.zeros(n), zeros_g, np.zeros(m)),
+        # x_0 <= -1 and -x_0 <= -1: empty feasible set
+        "infeasible": (
+            eye,
+            np.ones(n),
+            box,
+            np.concatenate([[-1.0], np.ones(n - 1), [-1.0], np.ones(n - 1)]),
+        ),
+        # LP whose objective decreases without bound (no row limits x_0 from above)
+        "unbounded": (
+            np.zeros((n, n)),
+            -np.eye(n)[0],
+            np.concatenate([-np.eye(n), -np.eye(n)]),
+            np.ones(m),
+        ),
+        # tight pairs 0 <= x <= 0 (equalities as two inequalities): solution x = 0
+        "tight_pairs": (eye, np.ones(n), box, np.zeros(m)),
+        "indefinite_P": (-eye, np.zeros(n), box, np.ones(m)),
+    }
+    return cases
+
+
+def test_degenerate_inputs_give_finite_flagged_output():
+    cases = _degenerate_cases()
+    stacked = [np.stack([c[i] for c in cases.values()]).astype(np.float32) for i in range(4)]
+    with np.errstate(all="ignore"):
+        res = _solve_batch(*(jp.asarray(a) for a in stacked))
+    res = jax.tree.map(np.asarray, res)
+    for field in dataclasses.fields(res):
+        assert np.all(np.isfinite(getattr(res, field.name))), field.name
+    flags = {name: (bool(res.valid[i]), bool(res.converged[i])) for i, name in enumerate(cases)}
+    for name in ("nan_P", "inf_h", "nan_G", "infeasible"):
+        assert flags[name] == (False, False), (name, flags[name])
+        assert np.all(res.x[list(cases).index(name)] == 0.0), name
+    assert not flags["unbounded"][1], flags["unbounded"]
+    assert flags["all_zero"][0], flags["all_zero"]  # x = 0 is optimal
+    i_tight = list(cases).index("tight_pairs")
+    assert flags["tight_pairs"][0], flags["tight_pairs"]
+    assert np.abs(res.x[i_tight]).max() <= _TIGHT_PAIR_TOL, res.x[i_tight]
+
+
+def test_warm_start_from_previous_solution(random_problems):
+    """Re-solving after a small change of q and h from the previous solution: fewer iterations to
+    the tolerance; every problem flagged converged is as accurate as a cold solve."""
+    P, q, G, h, _ = random_problems
+    rng = np.random.default_rng(1)
+    q1 = q + 0.01 * np.abs(q).max(1, keepdims=True) * rng.normal(size=q.shape)
+    h1 = h + 0.01 * np.abs(h).max(1, keepdims=True) * rng.uniform(size=h.shape)  # stays feasible
+    _, j1 = osqp_reference(P, q1, G, h1)
+    first = _solve_batch(*(jp.asarray(a, jp.float32) for a in (P, q, G, h)))
+    new = tuple(jp.asarray(a, jp.float32) for a in (P, q1, G, h1))
+    cold = _solve_batch(*new)
+    warm = _solve_batch_warm(*new, first)
+    it_cold, it_warm = np.asarray(cold.iterations), np.asarray(warm.iterations)
+    assert np.mean(it_warm) < _WARM_ITERATION_RATIO * np.mean(it_cold), (it_warm, it_cold)
+    assert np.median(it_warm) < np.median(it_cold)
+    ok = np.asarray(warm.converged)
+    assert ok.mean() >= _CONVERGED_FRACTION
+    subset = jax.tree.map(lambda a: np.asarray(a)[ok], warm)
+    check_against_reference(subset, (P[ok], q1[ok], G[ok], h1[ok]), j1[ok])
+
+
+def test_invalid_warm_start_is_ignored(random_problems):
+    P, q, G, h, j_star = random_problems
+    args = [jp.asarray(a, jp.float32) for a in (P, q, G, h)]
+    bad = _solve_batch(*args)
+    bad = dataclasses.replace(bad, x=jp.full_like(bad.x, jp.nan), valid=jp.zeros_like(bad.valid))
+    res = _solve_batch_warm(*args, bad)
+    check_against_reference(res, (P, q, G, h), j_star)
+
+
+def test_batch_is_traced_once(random_problems):
+    """The batch solver traces solve once per batch shape, not per problem or per call."""
+    P, q, G, h, _ = random_problems
+    args = [jp.asarray(a, jp.float32) for a in (P, q, G, h)]
+    before = len(_TRACES)
+    _solve_batch(*args).x.block_until_ready()
+    after_first = len(_TRACES)
+    _solve_batch(args[0] * 2.0, *args[1:]).x.block_until_ready()
+    assert after_first - before <= 1  # 0 if an earlier test already traced this shape
+    assert len(_TRACES) == after_first
