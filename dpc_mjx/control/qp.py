@@ -7,7 +7,7 @@ Solves, for one problem (vmap it for a batch)::
 Equalities can be passed as pairs of opposite inequalities; the method tolerates the empty
 interior this creates (slower, with growing duals, and the best iterate is returned).
 
-Method (docs/qp_notes.md has the choice, the tuning and the measurements):
+Method (docs/decisions.md has the choice and the tuning, docs/benchmarks.md the speed):
   * Ruiz equilibration of [P G'; G 0] (variable scaling D, row scaling E, 2 sweeps) and a cost
     scaling c, so that float32 works with entries of order one.
   * Slack form G x + s = h, s >= 0, duals z >= 0, infeasible start. Each iteration forms the
