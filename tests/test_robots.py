@@ -10,6 +10,7 @@ import pytest
 
 from dpc_mjx import DpcError, assets
 from dpc_mjx.robots import VARIANTS, ArmSpec, Mount, RobotSpec, UrdfArm, build, resolve
+from dpc_mjx.robots.arms import WIDOWX_RANGES
 from dpc_mjx.robots.layout import layout, mount_wrench
 from dpc_mjx.robots.mjcf import robot_filename, robot_xml, scene_filename, scene_xml
 from dpc_mjx.robots.standing import home_ctrl, with_leg_servos
@@ -66,6 +67,17 @@ def test_arm_and_gripper_masses_match_spec(name):
         assert model.body_subtreemass[gripper] == pytest.approx(
             arm_spec.gripper_mass, abs=_MASS_TOL
         )
+
+
+@pytest.mark.parametrize("name", ["regular", "longer", "heavier", "double", "pusher"])
+def test_widowx_joint_ranges_are_radians(name):
+    """The arm's ranges are given in rad; MjSpec's default compiler unit is degrees."""
+    model = build(name)
+    for arm in layout(model).arms:
+        for adr in arm.qpos:
+            j = int(np.flatnonzero(model.jnt_qposadr == adr)[0])
+            short = model.joint(j).name.removeprefix(arm.prefix)
+            np.testing.assert_allclose(model.jnt_range[j], WIDOWX_RANGES[short], err_msg=short)
 
 
 @pytest.mark.parametrize("name", [n for n in sorted(VARIANTS) if n != "none"])

@@ -34,6 +34,11 @@ FINGER_LENGTH = 0.04
 FINGER_TRAVEL = 0.03  # slide range of the moving finger
 FINGER_MASS_FRACTION = 0.2  # of gripper_mass; the palm carries the rest
 
+# End effectors: a one-finger gripper, or a flat plate for pushing (no finger, 4 arm DOF).
+EE_SHAPES = ("gripper", "plate")
+PLATE_OFFSET = 0.01  # wrist end to the plate's back face
+PLATE_HALF = (0.005, 0.06, 0.04)  # half extents: thickness (along the wrist), width, height
+
 ARM_ARMATURE = 0.01  # kg·m² on every arm joint, keeps stiff position servos stable at dt 4 ms
 ARM_DAMPING = 0.05  # N·m·s/rad
 
@@ -103,8 +108,15 @@ class ArmSpec:
     upper_arm_mass: float = 0.2
     forearm_mass: float = 0.15
     wrist_mass: float = 0.08
-    gripper_mass: float = 0.1  # palm + finger (+ any payload you add here)
+    gripper_mass: float = 0.1  # palm + finger, or the plate (+ any payload you add here)
     mount: Mount = Mount()
+    ee_shape: str = "gripper"  # one of EE_SHAPES
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """Joint names in kinematic order (the plate has no finger joint)."""
+        names = tuple(WIDOWX_SERVOS)
+        return names if self.ee_shape == "gripper" else names[:-1]
 
     @property
     def mass(self) -> float:
@@ -119,8 +131,10 @@ class ArmSpec:
         )
 
     def validate(self, what: str = "arm") -> None:
+        if self.ee_shape not in EE_SHAPES:
+            raise DpcError(f"{what}: ee_shape must be one of {EE_SHAPES}, got {self.ee_shape!r}.")
         for f in dataclasses.fields(self):
-            if f.name == "mount":
+            if f.name in ("mount", "ee_shape"):
                 continue
             v = getattr(self, f.name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
@@ -178,7 +192,7 @@ def arm_spec(arm: ArmSpec | UrdfArm) -> mujoco.MjSpec:
 def home_qpos(arm: ArmSpec | UrdfArm, model: mujoco.MjModel, prefix: str) -> dict[str, float]:
     """Home joint angle (rad or m) per joint name of an attached arm."""
     if isinstance(arm, ArmSpec):
-        return {prefix + name: 0.0 for name in WIDOWX_SERVOS}
+        return {prefix + name: 0.0 for name in arm.joints}
     info = URDF_ARMS[arm.urdf]
     home = {}
     for j in range(model.njnt):
@@ -231,13 +245,10 @@ def box_inertia(mass, half):
 
 def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     spec = mujoco.MjSpec()
+    spec.compiler.degree = False  # every angle here is in rad (MjSpec's default is degrees)
     spec.modelname = "widowx"
     r = arm.link_radius
-    capsule, box, cyl = (
-        mujoco.mjtGeom.mjGEOM_CAPSULE,
-        mujoco.mjtGeom.mjGEOM_BOX,
-        mujoco.mjtGeom.mjGEOM_CYLINDER,
-    )
+    capsule, cyl = mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER
     rgba = [0.15, 0.15, 0.15, 1]
 
     base = spec.worldbody.add_body(name="base")
@@ -278,33 +289,21 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     _set_inertia(wrist, arm.wrist_mass, (L3 / 2, 0, 0), rod_inertia(arm.wrist_mass, L3, 0.8 * r, 0))
     wrist.add_geom(type=capsule, size=[0.8 * r, 0, 0], fromto=[0, 0, 0, L3, 0, 0])
 
-    palm_half = (PALM_LENGTH / 2, 0.03, 0.015)
     gripper = wrist.add_body(name="gripper", pos=[L3, 0, 0])
     gripper.fuse = 0  # welded, but kept as its own body so its mass can be batched
-    palm_mass = (1 - FINGER_MASS_FRACTION) * arm.gripper_mass
-    _set_inertia(gripper, palm_mass, (palm_half[0], 0, 0), box_inertia(palm_mass, palm_half))
-    gripper.add_geom(type=box, size=list(palm_half), pos=[palm_half[0], 0, 0], rgba=rgba)
-    jaw_half = (FINGER_LENGTH / 2, 0.004, 0.012)
-    gripper.add_geom(type=box, size=list(jaw_half), pos=[PALM_LENGTH + jaw_half[0], -0.026, 0])
-    gripper.add_site(
-        name=EE_SITE,
-        pos=[PALM_LENGTH + FINGER_LENGTH, 0, 0],
-        size=[0.01, 0, 0],
-        group=a1.VISUAL_GROUP_SITES,
-    )
-
-    finger = gripper.add_body(name="finger", pos=[PALM_LENGTH, 0.026, 0])
-    finger_mass = FINGER_MASS_FRACTION * arm.gripper_mass
-    _set_inertia(finger, finger_mass, (jaw_half[0], 0, 0), box_inertia(finger_mass, jaw_half))
-    finger.add_geom(type=box, size=list(jaw_half), pos=[jaw_half[0], 0, 0])
-
-    for body, name, axis in (
+    joints = [
         (turret, "waist", [0, 0, 1]),
         (upper, "shoulder", [0, 1, 0]),
         (fore, "elbow", [0, 1, 0]),
         (wrist, "wrist", [0, 1, 0]),
-        (finger, "gripper", [0, -1, 0]),  # positive closes the finger onto the fixed jaw
-    ):
+    ]
+    if arm.ee_shape == "gripper":
+        finger = _add_gripper(gripper, arm.gripper_mass, rgba)
+        joints.append((finger, "gripper", [0, -1, 0]))  # positive closes onto the fixed jaw
+    else:
+        _add_plate(gripper, arm.gripper_mass, rgba)
+
+    for body, name, axis in joints:
         kind = mujoco.mjtJoint.mjJNT_SLIDE if name == "gripper" else mujoco.mjtJoint.mjJNT_HINGE
         body.add_joint(
             name=name,
@@ -319,6 +318,53 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     for geom in spec.geoms:
         make_visual(geom)
     return spec
+
+
+def _add_gripper(gripper: mujoco.MjsBody, mass: float, rgba: list) -> mujoco.MjsBody:
+    """Palm, fixed jaw and ee site on the `gripper` body; returns the moving finger's body."""
+    palm_half = (PALM_LENGTH / 2, 0.03, 0.015)
+    palm_mass = (1 - FINGER_MASS_FRACTION) * mass
+    _set_inertia(gripper, palm_mass, (palm_half[0], 0, 0), box_inertia(palm_mass, palm_half))
+    gripper.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_BOX, size=list(palm_half), pos=[palm_half[0], 0, 0], rgba=rgba
+    )
+    jaw_half = (FINGER_LENGTH / 2, 0.004, 0.012)
+    gripper.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=list(jaw_half),
+        pos=[PALM_LENGTH + jaw_half[0], -0.026, 0],
+    )
+    gripper.add_site(
+        name=EE_SITE,
+        pos=[PALM_LENGTH + FINGER_LENGTH, 0, 0],
+        size=[0.01, 0, 0],
+        group=a1.VISUAL_GROUP_SITES,
+    )
+
+    finger = gripper.add_body(name="finger", pos=[PALM_LENGTH, 0.026, 0])
+    finger_mass = FINGER_MASS_FRACTION * mass
+    _set_inertia(finger, finger_mass, (jaw_half[0], 0, 0), box_inertia(finger_mass, jaw_half))
+    finger.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(jaw_half), pos=[jaw_half[0], 0, 0])
+    return finger
+
+
+def _add_plate(gripper: mujoco.MjsBody, mass: float, rgba: list) -> None:
+    """A flat pushing plate across the wrist axis, all of `mass` (kg); ee site on its face."""
+    centre = PLATE_OFFSET + PLATE_HALF[0]
+    _set_inertia(gripper, mass, (centre, 0, 0), box_inertia(mass, PLATE_HALF))
+    gripper.add_geom(
+        name="plate",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=list(PLATE_HALF),
+        pos=[centre, 0, 0],
+        rgba=rgba,
+    )
+    gripper.add_site(
+        name=EE_SITE,
+        pos=[PLATE_OFFSET + 2 * PLATE_HALF[0], 0, 0],
+        size=[0.01, 0, 0],
+        group=a1.VISUAL_GROUP_SITES,
+    )
 
 
 def _urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
