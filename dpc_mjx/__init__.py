@@ -8,9 +8,10 @@ import io
 with contextlib.redirect_stdout(io.StringIO()):
     from mujoco import mjx  # noqa: F401
 
-from dpc_mjx import robots
+from dpc_mjx import envs, robots
+from dpc_mjx.envs import make
 from dpc_mjx.errors import DpcError
 
 __version__ = "0.1.0"
 
-__all__ = ["DpcError", "robots", "__version__"]
+__all__ = ["DpcError", "envs", "make", "robots", "__version__"]

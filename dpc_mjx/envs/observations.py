@@ -8,9 +8,14 @@
 
 `s_body` has the same layout for every variant; `s_arm`/`p_arm` follow the arm (n = 0 for the
 bare A1). Works on `mujoco.MjData` and `mjx.Data` (numpy or jax arrays).
+
+An env's observation is `[s_body, s_arm, p_arm]` (`ObsLayout` gives the slices); the privileged
+block (never seen by the policy) is `[u_oracle (6), payload (1), ee_force (3)]` (`PRIVILEGED`).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import jax
 import jax.numpy as jp
@@ -19,6 +24,43 @@ from dpc_mjx.robots.layout import Layout
 from dpc_mjx.rotations import roll_pitch_yaw
 
 S_BODY_SIZE = 11
+# Privileged block: the measured mount wrench u = [f_a (N), tau_a (N·m)] about the A1 COM, world
+# frame (`controller.oracle_u`); total payload mass (kg); total force applied at the end
+# effectors by pushes, payload weight excluded (N, world).
+PRIVILEGED = {"u_oracle": slice(0, 6), "payload": slice(6, 7), "ee_force": slice(7, 10)}
+PRIVILEGED_SIZE = 10
+
+
+@dataclasses.dataclass(frozen=True)
+class ObsLayout:
+    """Slices of the flat observation `[s_body (11), s_arm (2 n), p_arm (n_act)]`."""
+
+    n_arm_joints: int  # n
+    n_arm_act: int
+
+    @property
+    def s_body(self) -> slice:
+        return slice(0, S_BODY_SIZE)
+
+    @property
+    def s_arm(self) -> slice:
+        return slice(S_BODY_SIZE, S_BODY_SIZE + 2 * self.n_arm_joints)
+
+    @property
+    def p_arm(self) -> slice:
+        return slice(self.s_arm.stop, self.s_arm.stop + self.n_arm_act)
+
+    @property
+    def size(self) -> int:
+        return self.p_arm.stop
+
+    def split(self, obs: jax.Array) -> dict[str, jax.Array]:
+        """{'s_body', 's_arm', 'p_arm'} views of `obs` (..., size)."""
+        return {k: obs[..., getattr(self, k)] for k in ("s_body", "s_arm", "p_arm")}
+
+    @classmethod
+    def of(cls, lay: Layout) -> ObsLayout:
+        return cls(n_arm_joints=len(lay.arm_dof), n_arm_act=len(lay.arm_act))
 
 
 def yaw_frame_velocity(d) -> jax.Array:
@@ -43,3 +85,21 @@ def s_arm(lay: Layout, d) -> jax.Array:
 def p_arm(lay: Layout, d) -> jax.Array:
     """(n_act,) the arm servos' targets (ctrl of the arm actuators)."""
     return jp.asarray(d.ctrl[lay.arm_act])
+
+
+def observation(lay: Layout, d, command: jax.Array) -> jax.Array:
+    """The flat observation `[s_body, s_arm, p_arm]` (see `ObsLayout`)."""
+    return jp.concatenate([s_body(d, command), s_arm(lay, d), p_arm(lay, d)])
+
+
+def world_yaw_rate(s_body_: jax.Array) -> jax.Array:
+    """Yaw rate (rad/s): the world-z component of the trunk angular velocity, from s_body alone.
+
+    For a ZYX (yaw-pitch-roll) orientation the world z axis in the trunk frame is
+    (-sin pitch, cos pitch sin roll, cos pitch cos roll), whatever the yaw.
+    """
+    roll, pitch, w = s_body_[..., 0], s_body_[..., 1], s_body_[..., 2:5]
+    z = jp.stack(
+        [-jp.sin(pitch), jp.cos(pitch) * jp.sin(roll), jp.cos(pitch) * jp.cos(roll)], axis=-1
+    )
+    return jp.sum(z * w, axis=-1)

@@ -1,4 +1,8 @@
-"""Named robot variants: the A1 with zero, one or two arms (the paper's Table I and more)."""
+"""Named robot variants: the A1 with zero, one or two arms (the paper's Table I and more).
+
+none: bare A1. regular/longer/heavier/double: Table I. pusher: the pushing task's heavier, flat
+arm (0.5 kg plate end effector, no gripper). so100/z1: URDF arms for transfer.
+"""
 
 from __future__ import annotations
 
@@ -65,6 +69,8 @@ VARIANTS: dict[str, RobotSpec] = {
             "double",
             (ArmSpec(mount=Mount((0.09, 0.06, _TOP))), ArmSpec(mount=Mount((0.09, -0.06, _TOP)))),
         ),
+        # Pushing task: heavier (0.5 kg) flat plate instead of the gripper; 4 arm DOF.
+        RobotSpec("pusher", (ArmSpec(gripper_mass=0.5, ee_shape="plate"),)),
         RobotSpec("so100", (UrdfArm("so100"),)),
         RobotSpec("z1", (UrdfArm("z1"),)),
     )

@@ -1,0 +1,234 @@
+"""`DpcEnv`: one A1-with-arms env in MJX behind the brax `Env` API, unbatched and pure.
+
+One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller tick -> mjx.step]
+at the physics rate (250 Hz), with u chosen by `config.controller`:
+
+    'policy': u = [max_force a[:3], max_torque a[3:]], a = clip(action, -1, 1)   (DPC)
+    'mbc'   : u = 0, the action is ignored                                       (paper baseline)
+    'oracle': u = measured arm-mount wrench (`controller.oracle_u`), action ignored
+
+State (brax `State`):
+    pipeline_state  mjx.Data
+    obs             (obs_size,) [s_body, s_arm, p_arm], slices in `env.obs_layout`
+    reward          () paper eq. 4 (+ `fall_penalty` on the falling step; 0 on a NaN reset)
+    done            () 1.0 on a fall or a non-finite/exploded state
+    metrics         per-step terms (see `METRICS`); wrappers add keys, so we never drop any
+    info            'rng' (2,) key; 'ctrl' ControllerState; 'dist' Disturbances;
+                    'privileged' (10,) [u_oracle, payload, ee_force] (`observations.PRIVILEGED`);
+                    'nan_reset' () 1.0 when this step was non-finite or exploded
+
+Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`closed_loop.FALL_*`). A non-finite or
+exploded step (|qvel| > `explode_speed`) keeps the previous physics and controller state, returns
+obs = 0 and reward = 0 with done = 1 and is counted in `metrics['nan_resets']`; the auto-reset
+wrapper (`wrappers.wrap_for_training`) then resets that env alone.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+from brax.envs.base import Env, State
+from mujoco import mjx
+
+from dpc_mjx import sim
+from dpc_mjx.control import gait
+from dpc_mjx.control.closed_loop import FALL_HEIGHT, FALL_TILT
+from dpc_mjx.control.controller import make_controller, oracle_u
+from dpc_mjx.envs import observations, rewards
+from dpc_mjx.envs.config import EnvConfig
+from dpc_mjx.envs.disturbances import make_sampler
+from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import build
+from dpc_mjx.robots.layout import layout
+from dpc_mjx.robots.variants import Arm, RobotSpec
+
+ACTION_SIZE = 6  # u = [f_a (3), tau_a (3)]
+# Per-step metrics (summed over an episode by brax's EpisodeWrapper):
+METRICS = (
+    "r_vel",  # eq. 2
+    "r_orn",  # eq. 3
+    "r_total",  # eq. 4 (without the fall penalty)
+    "fall",  # 1 on the step that falls
+    "nan_resets",  # 1 on a non-finite/exploded step
+    "vx_sq_err",  # (m/s)^2, yaw-frame forward speed minus command
+    "vy_sq_err",  # (m/s)^2
+    "yaw_rate_sq_err",  # (rad/s)^2
+    "roll_sq",  # rad^2
+    "pitch_sq",  # rad^2
+)
+_GAITS = {"trot": gait.trot, "stand": gait.stand}
+
+
+class DpcEnv(Env):
+    """A1 + arm(s) + low-level controller; `reset(rng)` / `step(state, action)` on one env."""
+
+    def __init__(self, config: EnvConfig, arm: str | Arm | RobotSpec = "regular"):
+        config.validate()
+        self.config = config
+        self.model = self.build_model(arm)
+        timestep = float(self.model.opt.timestep)
+        n_sub = round(config.policy_dt / timestep)
+        if n_sub < 1 or abs(n_sub * timestep - config.policy_dt) > 1e-9:
+            raise DpcError(
+                f"policy_dt={config.policy_dt} s must be a whole multiple of the physics step "
+                f"{timestep} s (e.g. {5 * timestep:g} s for 50 Hz)."
+            )
+        self.n_substeps = n_sub
+        self.lay = layout(self.model)
+        self.mx = sim.put_model(self.model)
+        self.controller = make_controller(self.model, gait_=_GAITS[config.gait]())
+        self.sampler = make_sampler(config, self.model, self.lay)
+        self.obs_layout = observations.ObsLayout.of(self.lay)
+        self._ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
+        self._ee_bodies = self.model.site_bodyid[self._ee_sites]
+        self._u_scale = jp.array([config.max_force] * 3 + [config.max_torque] * 3)
+
+    def build_model(self, arm: str | Arm | RobotSpec) -> mujoco.MjModel:
+        """The compiled scene; tasks with objects override this (add bodies with MjSpec)."""
+        return build(arm)
+
+    # brax Env API ---------------------------------------------------------------------------
+
+    @property
+    def observation_size(self) -> int:
+        return self.obs_layout.size
+
+    @property
+    def action_size(self) -> int:
+        return ACTION_SIZE
+
+    @property
+    def backend(self) -> str:
+        return "mjx"
+
+    @property
+    def dt(self) -> float:
+        """s per env step."""
+        return self.config.policy_dt
+
+    def reset(self, rng: jax.Array) -> State:
+        rng, k_pose, k_dist = jax.random.split(rng, 3)
+        model, lay, cfg = self.model, self.lay, self.config
+        qpos = jp.asarray(model.key_qpos[0], jp.float32)
+        noise = jax.random.uniform(  # leg joints ~ U(-joint_noise, joint_noise) rad
+            k_pose, (len(lay.leg_qpos),), minval=-cfg.joint_noise, maxval=cfg.joint_noise
+        )
+        qpos = qpos.at[lay.leg_qpos].add(noise)
+        dist = self.sampler.init(k_dist)
+        ctrl = jp.asarray(model.key_ctrl[0], jp.float32)
+        ctrl = ctrl.at[lay.arm_act].set(self.sampler.arm_targets(dist, jp.zeros(())))
+        d = mjx.make_data(self.mx).replace(qpos=qpos, ctrl=ctrl)
+        d = mjx.forward(self.mx, d)
+        info = {
+            "rng": rng,
+            "ctrl": self.controller.init(d),
+            "dist": dist,
+            "privileged": self._privileged(d, dist),
+            "nan_reset": jp.zeros(()),
+        }
+        metrics = {k: jp.zeros(()) for k in METRICS}
+        obs = observations.observation(lay, d, dist.command)
+        return State(d, obs, jp.zeros(()), jp.zeros(()), metrics, info)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        d0, info = state.pipeline_state, state.info
+        rng, key = jax.random.split(info["rng"])
+        dist = self.sampler.advance(info["dist"], d0.time, key)
+        command = dist.command
+        u_policy = self._u_scale * jp.clip(action, -1.0, 1.0)
+
+        def substep(carry, _):
+            d, cs = carry
+            if self.config.controller == "mbc":
+                u = jp.zeros(ACTION_SIZE)
+            elif self.config.controller == "oracle":
+                u = oracle_u(self.lay, d, self._com_pos(d))
+            else:
+                u = u_policy
+            targets = self.sampler.arm_targets(dist, d.time)
+            cs, ctrl = self.controller.step(cs, d, command, u, targets)
+            xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time))
+            d = mjx.step(self.mx, d.replace(ctrl=ctrl, xfrc_applied=xfrc))
+            return (d, cs), None
+
+        (d, cs), _ = jax.lax.scan(substep, (d0, info["ctrl"]), None, length=self.n_substeps)
+
+        obs = observations.observation(self.lay, d, command)
+        sb = obs[self.obs_layout.s_body]
+        vel = jp.stack([sb[5], sb[6], observations.world_yaw_rate(sb)])
+        r = rewards.total_reward(vel, command, sb[:2], jp.zeros(2))  # desired roll = pitch = 0
+        fall = (d.qpos[2] < FALL_HEIGHT) | jp.any(jp.abs(sb[:2]) > FALL_TILT)
+        privileged = self._privileged(d, dist)
+        bad = ~(
+            _finite(d.qpos, d.qvel, d.ctrl, obs, privileged, cs.forces, cs.qp.x, r["r_total"])
+            & jp.all(jp.abs(d.qvel) <= self.config.explode_speed)
+        )
+        fall = fall & ~bad
+        err = vel - command
+        new_metrics = {
+            "r_vel": r["r_vel"],
+            "r_orn": r["r_orn"],
+            "r_total": r["r_total"],
+            "fall": fall.astype(jp.float32),
+            "nan_resets": bad.astype(jp.float32),
+            "vx_sq_err": err[0] ** 2,
+            "vy_sq_err": err[1] ** 2,
+            "yaw_rate_sq_err": err[2] ** 2,
+            "roll_sq": sb[0] ** 2,
+            "pitch_sq": sb[1] ** 2,
+        }
+        new_metrics = {  # a bad step reports 0 for every term but `nan_resets`
+            k: jp.where(bad & (k != "nan_resets"), 0.0, v) for k, v in new_metrics.items()
+        }
+        reward = r["r_total"] + jp.where(fall, self.config.fall_penalty, 0.0)
+        keep = lambda new, old: jp.where(bad, old, new)  # noqa: E731
+        d = jax.tree.map(keep, d, d0)
+        cs = jax.tree.map(keep, cs, info["ctrl"])
+        info = {
+            **info,
+            "rng": rng,
+            "ctrl": cs,
+            "dist": dist,
+            "privileged": jp.where(bad, 0.0, privileged),
+            "nan_reset": bad.astype(jp.float32),
+        }
+        return state.replace(
+            pipeline_state=d,
+            obs=jp.where(bad, 0.0, obs),
+            reward=jp.where(bad, 0.0, reward),
+            done=(fall | bad).astype(jp.float32),
+            metrics={**state.metrics, **new_metrics},
+            info=info,
+        )
+
+    # helpers --------------------------------------------------------------------------------
+
+    def _com_pos(self, d) -> jax.Array:
+        """(3,) m, world: the A1 (trunk + legs) COM, as the controller sees it."""
+        idx = self.controller.idx
+        offset = jp.asarray(idx.com_offset, jp.float32)
+        return d.xpos[idx.trunk] + d.xmat[idx.trunk] @ offset
+
+    def _ee_wrench(self, d, forces: jax.Array) -> jax.Array:
+        """(nbody, 6) xfrc_applied: each (3,) force of `forces` (k, 3) at its `ee` site.
+
+        xfrc_applied acts at the body COM (world frame, force then torque), so the force is
+        moved to the site with the torque (site - COM) x F."""
+        xfrc = jp.zeros((self.model.nbody, 6))
+        if not len(self._ee_sites):
+            return xfrc
+        lever = d.site_xpos[self._ee_sites] - d.xipos[self._ee_bodies]
+        wrench = jp.concatenate([forces, jp.cross(lever, forces)], axis=1)
+        return xfrc.at[self._ee_bodies].add(wrench)
+
+    def _privileged(self, d, dist) -> jax.Array:
+        """(10,) [u_oracle (6), payload (1), ee push force (3)], see `observations.PRIVILEGED`."""
+        u = oracle_u(self.lay, d, self._com_pos(d))
+        push = self.sampler.pushes(dist, d.time).sum(axis=0)
+        return jp.concatenate([u, dist.payload.sum()[None], push])
+
+
+def _finite(*arrays: jax.Array) -> jax.Array:
+    return jp.all(jp.array([jp.all(jp.isfinite(a)) for a in arrays]))

@@ -1,0 +1,125 @@
+"""Environment configuration: one frozen dataclass, validated before anything is compiled.
+
+Every task has its own default (`dpc_mjx.envs.reaching.default_config()`); override fields by
+keyword (`dpc_mjx.make("a1_arm/reaching", arm="regular", controller="mbc")`) or with
+`config.replace(...)`. Ranges are `(low, high)` tuples of a uniform distribution, `# ~ U(low, high)`
+in the field comments; a range with low == high is a constant.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+from dpc_mjx.errors import DpcError
+
+CONTROLLERS = ("policy", "mbc", "oracle")
+GAITS = ("trot", "stand")
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """What one DPC environment does; units and distributions in the comments."""
+
+    # Low-level controller and rates.
+    controller: str = "policy"  # 'policy': u = scaled action; 'mbc': u = 0; 'oracle': measured
+    gait: str = "trot"  # 'trot' or 'stand'
+    policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
+    episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
+
+    # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]], world
+    # frame, about the A1 COM (the controller's convention). The oracle's u is not clipped.
+    max_force: float = 60.0  # N per axis
+    max_torque: float = 20.0  # N·m per axis
+
+    # Reward (paper eqs. 2-4, fixed weights in `rewards`) and termination.
+    fall_penalty: float = -1000.0  # added on the step that falls (see `reaching.py` for why)
+    explode_speed: float = 500.0  # m/s or rad/s: |qvel| above this is an exploded state (reset)
+
+    # Initial state: home pose, leg joints offset ~ U(-joint_noise, joint_noise) rad.
+    joint_noise: float = 0.05
+
+    # Velocity command [v_x, v_y (m/s, yaw frame), yaw rate (rad/s)] per episode, each ~ U,
+    # redrawn once at t ~ U(command_switch) s (set both to a time past the episode to disable).
+    command_vx: tuple[float, float] = (0.0, 0.5)
+    command_vy: tuple[float, float] = (-0.2, 0.2)
+    command_yaw: tuple[float, float] = (-0.5, 0.5)
+    command_switch: tuple[float, float] = (5.0, 15.0)
+
+    # Arm reference motion: a new target every ~ U(reach_period) s, each joint ~ U(home -
+    # f (home - low), home + f (high - home)) with f = reach_fraction and [low, high] its
+    # model.jnt_range (unlimited joints: home +- pi); the servo targets move there along a smooth
+    # step 3x^2 - 2x^3 lasting `reach_move_time` s.
+    reach_fraction: float = 0.5
+    reach_period: tuple[float, float] = (1.5, 3.0)
+    reach_move_time: float = 1.0
+
+    # Sudden forces on each end effector: piecewise constant, world frame, applied at the `ee`
+    # site; magnitude ~ U(push_force) N, direction uniform on the sphere, lasting
+    # ~ U(push_duration) s, the next one starting ~ U(push_gap) s after the last one ends.
+    push_force: tuple[float, float] = (0.0, 30.0)  # calibrated, see reaching.py
+    push_duration: tuple[float, float] = (0.2, 1.0)
+    push_gap: tuple[float, float] = (0.5, 2.0)
+
+    # Payload held by each gripper for the whole episode, mass ~ U(payload_mass) kg, modelled as a
+    # constant downward force m g at the `ee` site (the model's masses are not changed).
+    payload_mass: tuple[float, float] = (0.0, 0.3)
+
+    def replace(self, **overrides: Any) -> EnvConfig:
+        """A validated copy with `overrides`; unknown names raise `DpcError` listing the fields."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise DpcError(
+                f"Unknown config option(s) {unknown} for {type(self).__name__}; "
+                f"known options: {sorted(names)}."
+            )
+        overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()}
+        out = dataclasses.replace(self, **overrides)
+        out.validate()
+        return out
+
+    def validate(self) -> None:
+        """Raise `DpcError` naming the first invalid field and what it must be."""
+        _choice("controller", self.controller, CONTROLLERS)
+        _choice("gait", self.gait, GAITS)
+        for name in ("policy_dt", "max_force", "max_torque", "explode_speed", "reach_move_time"):
+            _positive(name, getattr(self, name))
+        if not isinstance(self.episode_length, int) or self.episode_length <= 0:
+            raise DpcError(f"episode_length must be a positive int, got {self.episode_length!r}.")
+        _number("fall_penalty", self.fall_penalty)
+        _number("joint_noise", self.joint_noise, low=0.0)
+        _number("reach_fraction", self.reach_fraction, low=0.0, high=1.0)
+        for name in ("command_vx", "command_vy", "command_yaw"):
+            _range(name, getattr(self, name))
+        for name in ("command_switch", "push_force", "push_gap", "payload_mass"):
+            _range(name, getattr(self, name), low=0.0)
+        for name in ("reach_period", "push_duration"):
+            _range(name, getattr(self, name), low=1e-3)
+
+
+def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise DpcError(f"{name}={value!r} is not valid; choose one of {list(choices)}.")
+
+
+def _number(name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or not low <= value <= high:
+        raise DpcError(f"{name} must be a finite number in [{low}, {high}], got {value!r}.")
+
+
+def _positive(name: str, value: Any) -> None:
+    _number(name, value)
+    if value <= 0:
+        raise DpcError(f"{name} must be > 0, got {value!r}.")
+
+
+def _range(name: str, value: Any, low: float = -math.inf) -> None:
+    if not (isinstance(value, tuple) and len(value) == 2):
+        raise DpcError(f"{name} must be a (low, high) tuple, got {value!r}.")
+    for v in value:
+        _number(name, v, low=low)
+    if value[0] > value[1]:
+        raise DpcError(f"{name} must have low <= high, got {value!r}.")

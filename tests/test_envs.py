@@ -1,0 +1,217 @@
+"""The DPC environments: brax API, observation layout, reward, NaN isolation, errors (batch 2)."""
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+from brax.envs.base import Wrapper
+
+import dpc_mjx
+from dpc_mjx import DpcError
+from dpc_mjx.envs import base, registry, wrap_for_training
+from dpc_mjx.envs.disturbances import DisturbanceSampler, make_sampler
+
+_BATCH = 2
+_TASK = "a1_arm/reaching"
+_REWARD_TOL = 1e-5
+_OBS_SIZES = {  # arm -> (s_arm, p_arm) sizes: 5 joints (4 hinges + finger) per WidowX-like arm
+    "none": (0, 0),
+    "regular": (10, 5),
+    "double": (20, 10),
+}
+
+
+class _CountTraces(Wrapper):
+    """Counts how often `step` is traced (a Python side effect runs only while tracing)."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.traces = 0
+
+    def step(self, state, action):
+        self.traces += 1
+        return self.env.step(state, action)
+
+
+def _keys(seed=0, n=_BATCH):
+    return jax.random.split(jax.random.PRNGKey(seed), n)
+
+
+def _finite(tree) -> bool:
+    return all(bool(np.all(np.isfinite(np.asarray(x)))) for x in jax.tree.leaves(tree))
+
+
+def _row(tree, i):
+    return jax.tree.map(lambda x: np.asarray(x)[i], tree)
+
+
+@pytest.fixture(scope="module")
+def regular():
+    """The regular arm behind the training wrappers, jitted once; three steps taken."""
+    env = dpc_mjx.make(_TASK, arm="regular")
+    counted = _CountTraces(env)
+    wrapped = wrap_for_training(counted, episode_length=100)
+    reset, step = jax.jit(wrapped.reset), jax.jit(wrapped.step)
+    action = jp.zeros((_BATCH, env.action_size))
+    states = [reset(_keys())]
+    for _ in range(3):
+        states.append(step(states[-1], action))
+    return env, counted, step, action, states  # on the device, as a training loop has them
+
+
+@pytest.fixture(scope="module", params=["none", "double"])
+def plain(request):
+    """Other variants, unwrapped: jit(vmap(reset)) and jit(vmap(step)), two steps."""
+    env = dpc_mjx.make(_TASK, arm=request.param)
+    reset, step = jax.jit(jax.vmap(env.reset)), jax.jit(jax.vmap(env.step))
+    s = reset(_keys(1))
+    states = [s]
+    for _ in range(2):
+        states.append(step(states[-1], jp.zeros((_BATCH, env.action_size))))
+    return request.param, env, jax.device_get(states)
+
+
+def _check_layout(arm, env, states):
+    s_arm, p_arm = _OBS_SIZES[arm]
+    lay = env.obs_layout
+    assert env.observation_size == 11 + s_arm + p_arm == lay.size
+    assert env.action_size == 6
+    for s in states:
+        assert s.obs.shape == (_BATCH, env.observation_size)
+        parts = lay.split(s.obs)
+        assert [parts[k].shape[-1] for k in ("s_body", "s_arm", "p_arm")] == [11, s_arm, p_arm]
+        assert s.info["privileged"].shape == (_BATCH, dpc_mjx.envs.PRIVILEGED_SIZE)
+        assert _finite((s.obs, s.reward, s.done, s.metrics, s.info["privileged"]))
+        assert _finite(s.pipeline_state.qpos) and _finite(s.pipeline_state.qvel)
+    last = states[-1]
+    assert np.all(last.done == 0), "a standing start should not fall or blow up in 60 ms"
+    np.testing.assert_allclose(last.pipeline_state.time, 0.02 * (len(states) - 1), atol=1e-4)
+
+
+def test_regular_resets_and_steps_finitely(regular):
+    env, _, _, _, states = regular
+    states = jax.device_get(states)
+    _check_layout("regular", env, states)
+    assert set(base.METRICS) <= set(states[-1].metrics)
+    assert "episode_metrics" in states[-1].info  # brax's EpisodeWrapper ran
+
+
+def test_other_variants_reset_and_step_finitely(plain):
+    arm, env, states = plain
+    _check_layout(arm, env, states)
+    if arm == "none":  # no arm, no end-effector force
+        assert np.all(states[-1].info["privileged"][:, 6:] == 0)
+
+
+def test_step_is_traced_once(regular):
+    _, counted, step, action, states = regular
+    assert counted.traces == 1  # reset, then 3 steps of the jitted wrapped env
+
+
+def test_reward_is_the_papers_formula(regular):
+    env, _, _, _, states = regular
+    s = jax.device_get(states[-1])
+    sb = env.obs_layout.split(s.obs)["s_body"]  # (B, 11)
+    d = s.pipeline_state
+    for i in range(_BATCH):
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, np.asarray(d.qpos[i, 3:7], float))
+        yaw_rate = (rot.reshape(3, 3) @ np.asarray(d.qvel[i, 3:6], float))[2]  # world z, rad/s
+        roll, pitch = sb[i, 0], sb[i, 1]
+        command = sb[i, 8:11]
+        np.testing.assert_allclose(command, s.info["dist"].command[i], atol=1e-6)
+        err = np.array([sb[i, 5], sb[i, 6], yaw_rate]) - command  # yaw-frame v_x, v_y; yaw rate
+        r_vel = np.exp(-8 * err**2).sum()  # eq. 2
+        r_orn = np.exp(-8 * roll**2) + np.exp(-8 * pitch**2)  # eq. 3, desired roll = pitch = 0
+        expected = 0.08 * r_vel + 0.05 * r_orn  # eq. 4
+        assert float(s.reward[i]) == pytest.approx(expected, abs=_REWARD_TOL)
+        assert float(s.metrics["r_total"][i]) == pytest.approx(expected, abs=_REWARD_TOL)
+
+
+def test_nan_in_one_env_resets_only_that_env(regular):
+    env, counted, step, action, states = regular
+    s = states[-1]
+    qvel = s.pipeline_state.qvel.at[0].set(jp.nan)
+    bad = s.replace(pipeline_state=s.pipeline_state.replace(qvel=qvel))
+    out, ref = jax.device_get(step(bad, action)), jax.device_get(step(s, action))
+    assert counted.traces == 1  # same compiled step
+    assert _finite(out)  # nothing non-finite survives, in any env
+    assert out.done[0] == 1 and out.metrics["nan_resets"][0] == 1 and out.reward[0] == 0
+    assert out.pipeline_state.time[0] == 0.0  # env 0 restarted (fresh reset)
+    assert float(out.info["ctrl"].t[0]) == 0.0  # ... with a fresh controller state
+    assert out.metrics["nan_resets"][1] == 0
+    for a, b in zip(jax.tree.leaves(_row(out, 1)), jax.tree.leaves(_row(ref, 1)), strict=True):
+        np.testing.assert_array_equal(a, b)  # env 1 exactly as without the NaN next to it
+
+
+def test_fall_ends_the_episode_with_the_penalty(regular):
+    env, counted, step, action, states = regular
+    s = states[-1]
+    base_pose = jp.array([0.0, 0.0, 0.6, np.cos(0.6), np.sin(0.6), 0.0, 0.0])
+    qpos = s.pipeline_state.qpos.at[1, :7].set(base_pose)  # in the air, rolled 1.2 rad
+    tilted = s.replace(pipeline_state=s.pipeline_state.replace(qpos=qpos))
+    out = jax.device_get(step(tilted, action))
+    assert counted.traces == 1
+    assert out.done.tolist() == [0, 1]
+    assert out.metrics["fall"].tolist() == [0, 1] and out.metrics["nan_resets"][1] == 0
+    penalty = env.config.fall_penalty
+    assert float(out.reward[1]) == pytest.approx(float(out.metrics["r_total"][1]) + penalty)
+    assert out.info["episode_metrics"]["fall"][1] == 1
+
+
+def test_disturbance_schedule_follows_its_config():
+    """Sampling alone (no physics): targets within bounds, pushes piecewise constant."""
+    model = dpc_mjx.robots.build("regular")
+    from dpc_mjx.robots.layout import layout
+
+    cfg = registry.get_config(_TASK, push_force=(10.0, 10.0), payload_mass=(0.2, 0.2))
+    sampler: DisturbanceSampler = make_sampler(cfg, model, layout(model))
+    d = sampler.init(jax.random.PRNGKey(3))
+    forces, targets = [], []
+    for k, t in enumerate(np.arange(0.0, 6.0, 0.02)):
+        d = sampler.advance(d, jp.float32(t), jax.random.PRNGKey(k))
+        forces.append(np.asarray(sampler.pushes(d, jp.float32(t))[0]))
+        targets.append(np.asarray(sampler.arm_targets(d, jp.float32(t))))
+        assert np.all(sampler.reach_low - 1e-6 <= d.ref_goal)
+        assert np.all(d.ref_goal <= sampler.reach_high + 1e-6)
+    norms = np.linalg.norm(forces, axis=1)
+    assert np.all((np.abs(norms - 10.0) < 1e-4) | (norms == 0))  # |F| = 10 N or off
+    assert 0 < np.mean(norms > 0) < 1  # some pushes, some pauses in 6 s
+    assert np.max(np.abs(np.diff(targets, axis=0))) < 0.2  # smooth: no jumps of the servo targets
+    np.testing.assert_allclose(
+        sampler.ee_forces(d, 0.0)[0, 2] - sampler.pushes(d, 0.0)[0, 2], -9.81 * 0.2, rtol=1e-5
+    )
+
+
+def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
+    compiles = []
+
+    def listener(event, duration, **_):
+        if "compile" in event:
+            compiles.append(event)
+
+    def no_build(*_):
+        pytest.fail("the model was built before the arguments were checked")
+
+    monkeypatch.setattr(base, "build", no_build)
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        with pytest.raises(DpcError, match="known tasks.*a1_arm/reaching"):
+            dpc_mjx.make("a1_arm/juggling")
+        with pytest.raises(DpcError, match="known variants"):
+            dpc_mjx.make(_TASK, arm="regularr")
+        with pytest.raises(DpcError, match="controller.*'mbc'"):
+            dpc_mjx.make(_TASK, controller="dpc")
+        with pytest.raises(DpcError, match="low <= high"):
+            dpc_mjx.make(_TASK, push_force=(40.0, 0.0))
+        with pytest.raises(DpcError, match="known options"):
+            dpc_mjx.make(_TASK, push_forces=(0.0, 40.0))
+        with pytest.raises(DpcError, match="episode_length"):
+            dpc_mjx.make(_TASK, episode_length=0)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert compiles == []
+    monkeypatch.undo()
+    with pytest.raises(DpcError, match="multiple of the physics step"):
+        dpc_mjx.make(_TASK, arm="none", policy_dt=0.005)
