@@ -21,7 +21,10 @@ _MIN_HEIGHT = 0.18  # m; the home trunk height is 0.27
 _MAX_TILT = 0.3  # rad of roll or pitch
 _MJX_C_HEIGHT_TOL = 2e-3  # m, after 100 steps (MJX float32 vs C float64)
 _MJX_C_QUAT_TOL = 2e-3
-_BATCHED_FORCE_RTOL = 0.03  # mount force vs arm weight after 0.4 s of standing
+# Mount force vs arm weight once the drop from the keyframe has settled: the arm swings for about
+# 0.8 s (the longer, heavier arm's force is 8% off at 0.4 s), then agrees to ~0.2%.
+_BATCHED_FORCE_RTOL = 0.01
+_BATCHED_CALLS = 6  # x 50 steps = 1.2 s
 _G = 9.81
 
 
@@ -85,7 +88,7 @@ def test_one_compile_serves_a_batch_of_arm_parameters():
     data = sim.batched_data(
         mx, np.tile(model.key_qpos[0], (2, 1)), np.tile(home_ctrl(model), (2, 1))
     )
-    for _ in range(2):
+    for _ in range(_BATCHED_CALLS):
         data = run(mx, data)
     assert len(traces) == 1
     arm = layout(model).arms[0]
