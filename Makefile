@@ -30,6 +30,7 @@ bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_physics.py
 	$(BIN)/python experiments/bench_qp.py
 	$(BIN)/python experiments/bench_controller.py
+	$(BIN)/python experiments/bench_env.py
 
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf

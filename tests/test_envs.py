@@ -171,7 +171,7 @@ def test_disturbance_schedule_follows_its_config():
     forces, targets = [], []
     for k, t in enumerate(np.arange(0.0, 6.0, 0.02)):
         d = sampler.advance(d, jp.float32(t), jax.random.PRNGKey(k))
-        forces.append(np.asarray(sampler.pushes(d, jp.float32(t))[0]))
+        forces.append(np.asarray(sampler.pushes(d, jp.float32(t), jp.float32(0.7))[0]))
         targets.append(np.asarray(sampler.arm_targets(d, jp.float32(t))))
         assert np.all(sampler.reach_low - 1e-6 <= d.ref_goal)
         assert np.all(d.ref_goal <= sampler.reach_high + 1e-6)
@@ -180,8 +180,26 @@ def test_disturbance_schedule_follows_its_config():
     assert 0 < np.mean(norms > 0) < 1  # some pushes, some pauses in 6 s
     assert np.max(np.abs(np.diff(targets, axis=0))) < 0.2  # smooth: no jumps of the servo targets
     np.testing.assert_allclose(
-        sampler.ee_forces(d, 0.0)[0, 2] - sampler.pushes(d, 0.0)[0, 2], -9.81 * 0.2, rtol=1e-5
+        sampler.ee_forces(d, 0.0, 0.0)[0, 2] - sampler.pushes(d, 0.0, 0.0)[0, 2],
+        -9.81 * 0.2,
+        rtol=1e-5,
     )
+
+
+def test_sagittal_pushes_turn_with_the_heading():
+    """push_axis_weights (1, 0, 1): no lateral push in the yaw frame, whatever the heading."""
+    model = dpc_mjx.robots.build("regular")
+    from dpc_mjx.robots.layout import layout
+
+    cfg = registry.get_config(_TASK, push_force=(10.0, 10.0), push_axis_weights=(1.0, 0.0, 1.0))
+    sampler = make_sampler(cfg, model, layout(model))
+    d = sampler.init(jax.random.PRNGKey(5))
+    t = (d.push_on[0] + d.push_off[0]) / 2  # inside the first push
+    ahead = np.asarray(sampler.pushes(d, t, jp.float32(0.0))[0])  # heading +x
+    left = np.asarray(sampler.pushes(d, t, jp.float32(np.pi / 2))[0])  # heading +y
+    assert np.linalg.norm(ahead) == pytest.approx(10.0, rel=1e-5)
+    assert abs(ahead[1]) < 1e-5 and abs(left[0]) < 1e-5  # nothing across the heading
+    np.testing.assert_allclose(left, [0.0, ahead[0], ahead[2]], atol=1e-5)
 
 
 def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):

@@ -15,7 +15,18 @@ State (brax `State`):
     metrics         per-step terms (see `METRICS`); wrappers add keys, so we never drop any
     info            'rng' (2,) key; 'ctrl' ControllerState; 'dist' Disturbances;
                     'privileged' (10,) [u_oracle, payload, ee_force] (`observations.PRIVILEGED`);
-                    'nan_reset' () 1.0 when this step was non-finite or exploded
+                    'nan_reset' () 1.0 when this step was non-finite or exploded;
+                    'objects' (n_obj, 3) m, world positions of the scene's free objects (box,
+                    balls; `props.prop_layout` order), only in scenes that have some
+
+Tasks customise the env through hooks, never by rewriting `step`:
+
+    build_model(arm)        the compiled scene (objects: `props.task_spec(task, arm)`)
+    check_arm(robot)        raise `DpcError` for an arm the task cannot use (before any compile)
+    arm_targets(dist, t, d) (n_act,) arm servo targets at physics time t: the reference motion
+                            p_arm (reaching: the sampler's random targets; tasks: scripts)
+    task_physics(d, t)      edits the data before each mjx.step (carrying: grasp welds)
+    task_metrics(d)         extra per-step metrics (scalars, the same keys at reset and step)
 
 Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`closed_loop.FALL_*`). A non-finite or
 exploded step (|qvel| > `explode_speed`) keeps the previous physics and controller state, returns
@@ -35,13 +46,14 @@ from mujoco import mjx
 from dpc_mjx import sim
 from dpc_mjx.control import gait
 from dpc_mjx.control.closed_loop import FALL_HEIGHT, FALL_TILT
-from dpc_mjx.control.controller import make_controller, oracle_u
+from dpc_mjx.control.controller import make_controller, oracle_u, yaw_of
 from dpc_mjx.envs import observations, rewards
 from dpc_mjx.envs.config import EnvConfig
-from dpc_mjx.envs.disturbances import make_sampler
+from dpc_mjx.envs.disturbances import Disturbances, make_sampler
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
+from dpc_mjx.robots.props import prop_layout
 from dpc_mjx.robots.variants import Arm, RobotSpec
 
 ACTION_SIZE = 6  # u = [f_a (3), tau_a (3)]
@@ -81,13 +93,42 @@ class DpcEnv(Env):
         self.controller = make_controller(self.model, gait_=_GAITS[config.gait]())
         self.sampler = make_sampler(config, self.model, self.lay)
         self.obs_layout = observations.ObsLayout.of(self.lay)
+        self.props = prop_layout(self.model)
+        self._object_bodies = np.array([o.body for o in self.props.objects], int)
         self._ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
         self._ee_bodies = self.model.site_bodyid[self._ee_sites]
         self._u_scale = jp.array([config.max_force] * 3 + [config.max_torque] * 3)
 
+    # task hooks -----------------------------------------------------------------------------
+
     def build_model(self, arm: str | Arm | RobotSpec) -> mujoco.MjModel:
         """The compiled scene; tasks with objects override this (add bodies with MjSpec)."""
         return build(arm)
+
+    @classmethod
+    def check_arm(cls, robot: RobotSpec) -> None:
+        """Raise `DpcError` if the task cannot use `robot`'s arms; called by `make` before
+        anything is built. Every arm (or none) can reach random targets."""
+
+    def arm_targets(self, dist: Disturbances, t: jax.Array, d: mjx.Data) -> jax.Array:
+        """(n_act,) arm servo targets (rad, m for a finger) at physics time t (s): p_arm.
+
+        Reaching: the sampler's random targets. `d` is the physics state of this tick (at reset:
+        the initial state, forwarded with the home targets)."""
+        del d
+        return self.sampler.arm_targets(dist, t)
+
+    def task_physics(self, d: mjx.Data, t: jax.Array) -> mjx.Data:
+        """The data handed to `mjx.step` at physics time t (s), after the controller set `ctrl`
+        and `xfrc_applied`: tasks switch grasp welds here. Pure, jit-safe."""
+        del t
+        return d
+
+    def task_metrics(self, d: mjx.Data) -> dict[str, jax.Array]:
+        """Per-step task metrics (scalars) merged into `state.metrics`, from the data after the
+        step (at reset: the initial data). Keys must not depend on the data."""
+        del d
+        return {}
 
     # brax Env API ---------------------------------------------------------------------------
 
@@ -118,17 +159,18 @@ class DpcEnv(Env):
         qpos = qpos.at[lay.leg_qpos].add(noise)
         dist = self.sampler.init(k_dist)
         ctrl = jp.asarray(model.key_ctrl[0], jp.float32)
-        ctrl = ctrl.at[lay.arm_act].set(self.sampler.arm_targets(dist, jp.zeros(())))
         d = mjx.make_data(self.mx).replace(qpos=qpos, ctrl=ctrl)
         d = mjx.forward(self.mx, d)
+        d = d.replace(ctrl=ctrl.at[lay.arm_act].set(self.arm_targets(dist, jp.zeros(()), d)))
         info = {
             "rng": rng,
             "ctrl": self.controller.init(d),
             "dist": dist,
             "privileged": self._privileged(d, dist),
             "nan_reset": jp.zeros(()),
+            **self._objects(d),
         }
-        metrics = {k: jp.zeros(()) for k in METRICS}
+        metrics = {k: jp.zeros(()) for k in METRICS} | self.task_metrics(d)
         obs = observations.observation(lay, d, dist.command)
         return State(d, obs, jp.zeros(()), jp.zeros(()), metrics, info)
 
@@ -147,10 +189,11 @@ class DpcEnv(Env):
                 u = oracle_u(self.lay, d, self._com_pos(d))
             else:
                 u = u_policy
-            targets = self.sampler.arm_targets(dist, d.time)
+            targets = self.arm_targets(dist, d.time, d)
             cs, ctrl = self.controller.step(cs, d, command, u, targets)
-            xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time))
-            d = mjx.step(self.mx, d.replace(ctrl=ctrl, xfrc_applied=xfrc))
+            xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
+            d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time)
+            d = mjx.step(self.mx, d)
             return (d, cs), None
 
         (d, cs), _ = jax.lax.scan(substep, (d0, info["ctrl"]), None, length=self.n_substeps)
@@ -178,6 +221,7 @@ class DpcEnv(Env):
             "yaw_rate_sq_err": err[2] ** 2,
             "roll_sq": sb[0] ** 2,
             "pitch_sq": sb[1] ** 2,
+            **self.task_metrics(d),
         }
         new_metrics = {  # a bad step reports 0 for every term but `nan_resets`
             k: jp.where(bad & (k != "nan_resets"), 0.0, v) for k, v in new_metrics.items()
@@ -193,6 +237,7 @@ class DpcEnv(Env):
             "dist": dist,
             "privileged": jp.where(bad, 0.0, privileged),
             "nan_reset": bad.astype(jp.float32),
+            **self._objects(d),
         }
         return state.replace(
             pipeline_state=d,
@@ -204,6 +249,14 @@ class DpcEnv(Env):
         )
 
     # helpers --------------------------------------------------------------------------------
+
+    def _objects(self, d) -> dict[str, jax.Array]:
+        """{'objects': (n_obj, 3) m, world} for scenes with free objects, else {}."""
+        return {"objects": d.xpos[self._object_bodies]} if self._object_bodies.size else {}
+
+    def _yaw(self, d) -> jax.Array:
+        """() rad, the trunk's heading."""
+        return yaw_of(d.xmat[self.controller.idx.trunk])
 
     def _com_pos(self, d) -> jax.Array:
         """(3,) m, world: the A1 (trunk + legs) COM, as the controller sees it."""
@@ -226,7 +279,7 @@ class DpcEnv(Env):
     def _privileged(self, d, dist) -> jax.Array:
         """(10,) [u_oracle (6), payload (1), ee push force (3)], see `observations.PRIVILEGED`."""
         u = oracle_u(self.lay, d, self._com_pos(d))
-        push = self.sampler.pushes(dist, d.time).sum(axis=0)
+        push = self.sampler.pushes(dist, d.time, self._yaw(d)).sum(axis=0)
         return jp.concatenate([u, dist.payload.sum()[None], push])
 
 

@@ -46,6 +46,9 @@ class EnvConfig:
     command_vy: tuple[float, float] = (-0.2, 0.2)
     command_yaw: tuple[float, float] = (-0.5, 0.5)
     command_switch: tuple[float, float] = (5.0, 15.0)
+    # The command after the switch: None redraws it from the ranges above; a fixed
+    # (v_x, v_y, yaw rate) scripts a change instead (e.g. a turn mid-episode, `lifting.py`).
+    command_after: tuple[float, float, float] | None = None
 
     # Arm reference motion: a new target every ~ U(reach_period) s, each joint ~ U(home -
     # f (home - low), home + f (high - home)) with f = reach_fraction and [low, high] its
@@ -55,11 +58,15 @@ class EnvConfig:
     reach_period: tuple[float, float] = (1.5, 3.0)
     reach_move_time: float = 1.0
 
-    # Sudden forces on each end effector: piecewise constant, world frame, applied at the `ee`
-    # site; magnitude ~ U(push_force) N, direction uniform on the sphere, lasting
+    # Sudden forces on each end effector: piecewise constant, drawn in the yaw (heading) frame,
+    # applied at the `ee` site; magnitude ~ U(push_force) N, direction below, lasting
     # ~ U(push_duration) s, the next one starting ~ U(push_gap) s after the last one ends.
     push_force: tuple[float, float] = (0.0, 30.0)  # calibrated, see reaching.py
     push_duration: tuple[float, float] = (0.2, 1.0)
+    # Push direction: a (3,) standard normal vector scaled per yaw-frame axis (x, y, z) by these
+    # weights, then normalised: (1, 1, 1) is uniform on the sphere, (1, 0, 1) keeps pushes in the
+    # sagittal plane (no lateral component).
+    push_axis_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)
     push_gap: tuple[float, float] = (0.5, 2.0)
 
     # Payload held by each gripper for the whole episode, mass ~ U(payload_mass) kg, modelled as a
@@ -93,10 +100,25 @@ class EnvConfig:
         _number("reach_fraction", self.reach_fraction, low=0.0, high=1.0)
         for name in ("command_vx", "command_vy", "command_yaw"):
             _range(name, getattr(self, name))
+        if self.command_after is not None:
+            if not (isinstance(self.command_after, tuple) and len(self.command_after) == 3):
+                raise DpcError(
+                    "command_after must be None or a (v_x, v_y, yaw rate) tuple, "
+                    f"got {self.command_after!r}."
+                )
+            for v in self.command_after:
+                _number("command_after", v)
         for name in ("command_switch", "push_force", "push_gap", "payload_mass"):
             _range(name, getattr(self, name), low=0.0)
         for name in ("reach_period", "push_duration"):
             _range(name, getattr(self, name), low=1e-3)
+        w = self.push_axis_weights
+        if not (isinstance(w, tuple) and len(w) == 3):
+            raise DpcError(f"push_axis_weights must be an (x, y, z) tuple, got {w!r}.")
+        for v in w:
+            _number("push_axis_weights", v, low=0.0)
+        if not any(v > 0 for v in w):
+            raise DpcError("push_axis_weights must have at least one weight > 0.")
 
 
 def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:

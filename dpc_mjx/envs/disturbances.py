@@ -33,7 +33,7 @@ class Disturbances:
     ref_goal: jax.Array  # (n,) target of the current motion
     ref_t0: jax.Array  # () s, start of the current motion
     ref_next: jax.Array  # () s, when the next target is drawn
-    push: jax.Array  # (k, 3) N, world frame, force of the current/next push of each arm
+    push: jax.Array  # (k, 3) N, yaw frame, force of the current/next push of each arm
     push_on: jax.Array  # (k,) s, push start
     push_off: jax.Array  # (k,) s, push end
     payload: jax.Array  # (k,) kg held by each gripper
@@ -74,8 +74,10 @@ class DisturbanceSampler:
         """Redraw whatever is due at time t (s): command, arm target, pushes that have ended."""
         k_cmd, k_ref, k_push = jax.random.split(key, 3)
         switch = t >= d.command_switch
+        after = self.config.command_after
+        new = self._command(k_cmd) if after is None else jp.asarray(after, jp.float32)
         d = d.replace(
-            command=jp.where(switch, self._command(k_cmd), d.command),
+            command=jp.where(switch, new, d.command),
             command_switch=jp.where(switch, NEVER, d.command_switch),
         )
         due = t >= d.ref_next
@@ -87,15 +89,21 @@ class DisturbanceSampler:
         x = jp.clip((t - d.ref_t0) / self.config.reach_move_time, 0.0, 1.0)
         return d.ref_start + (d.ref_goal - d.ref_start) * (3 * x**2 - 2 * x**3)
 
-    def pushes(self, d: Disturbances, t: jax.Array) -> jax.Array:
-        """(k, 3) N, world: the push force on each end effector at time t (0 between pushes)."""
-        active = (t >= d.push_on) & (t < d.push_off)
-        return d.push * active[:, None]
+    def pushes(self, d: Disturbances, t: jax.Array, yaw: jax.Array) -> jax.Array:
+        """(k, 3) N, world: the push force on each end effector at time t (0 between pushes).
 
-    def ee_forces(self, d: Disturbances, t: jax.Array) -> jax.Array:
+        Pushes are drawn in the robot's yaw (heading) frame and turned with it: `yaw` (rad) is the
+        trunk's current heading, so a push drawn along +x always pushes from behind."""
+        active = (t >= d.push_on) & (t < d.push_off)
+        c, s = jp.cos(yaw), jp.sin(yaw)
+        x, y = d.push[:, 0], d.push[:, 1]
+        world = jp.stack([c * x - s * y, s * x + c * y, d.push[:, 2]], axis=-1)
+        return world * active[:, None]
+
+    def ee_forces(self, d: Disturbances, t: jax.Array, yaw: jax.Array) -> jax.Array:
         """(k, 3) N, world: push + payload weight on each end effector at time t."""
         weight = jp.zeros((self.n_arms, 3)).at[:, 2].set(-GRAVITY * d.payload)
-        return self.pushes(d, t) + weight
+        return self.pushes(d, t, yaw) + weight
 
     def _command(self, key: jax.Array) -> jax.Array:
         cfg = self.config
@@ -119,7 +127,8 @@ class DisturbanceSampler:
         """For each arm whose push has ended, schedule the next one."""
         cfg, k = self.config, self.n_arms
         k_dir, k_mag, k_gap, k_dur = jax.random.split(key, 4)
-        direction = jax.random.normal(k_dir, (k, 3))  # uniform on the sphere once normalised
+        # direction ~ N(0, diag(w^2)) normalised, w = push_axis_weights (1, 1, 1: uniform sphere)
+        direction = jax.random.normal(k_dir, (k, 3)) * jp.asarray(cfg.push_axis_weights)
         direction = direction / jp.maximum(jp.linalg.norm(direction, axis=1, keepdims=True), 1e-6)
         force = direction * _uniform(k_mag, cfg.push_force, (k, 1))  # |F| ~ U(push_force) N
         on = t + _uniform(k_gap, cfg.push_gap, (k,))  # s ~ U(push_gap) after the last push

@@ -1,0 +1,181 @@
+"""The carrying task (paper §IV): move a ball from one table to another with the arm while the
+body keeps steady; `carrying_high` uses 0.45 m tables (default arm `longer`), and the `double`
+arm carries two balls, one per arm.
+
+Scene (`props.task_spec`): source table at (0.55, 0.3) m (+y, left), target table at
+(0.55, -0.3) m, top surface 0.30 m (0.45 m high), one 0.1 kg ball per arm on the source table.
+The regular arm cannot reach the ball from the origin (0.47 m from the shoulder, 0.42 m reach),
+so the robot starts `robot_x` = 0.15 m closer to the tables (its feet do not touch them).
+
+Script (joint space, `scripts.Script`): after `start_time` s, moves of `move_time` s each followed
+by `hold_time` s, through
+
+    home -> above the ball (+6 cm) -> at the ball -> close (finger shut, weld on) -> lift (+10 cm)
+    -> swing the waist over the target table -> lower (ball 1 cm above its rest height)
+    -> release (weld off, finger open) -> retreat (+6 cm) -> home
+
+The waypoints are solved once per env (`scripts.solve_ik`, MuJoCo C) for the grasp site (between
+the jaws), gripper pitched about 45 deg down, robot standing level at `scripts.STAND_HEIGHT`;
+ball k goes from its place on the source table to the same place on the target table
+(translated by -0.6 m in y), so the two arms of `double` never cross.
+
+Grasp: a weld, not friction (see `props`). During the close move and its hold, weld k switches
+on as soon as the grasp site is within `grasp_threshold` of ball k (`props.grasp_gaps`), and stays
+on until the release move starts (`task_physics`, every physics step, via `props.set_welds`).
+
+Metrics: `ball_target_dist` (m, mean over balls of ball centre to its rest point on the target
+table), `ball_on_target` (fraction of balls resting on the target table, weld off), `grasped`
+(fraction of welds on). The body stands (trot in place, command 0); no pushes, no payload.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+
+from dpc_mjx.envs import scripts
+from dpc_mjx.envs.base import DpcEnv
+from dpc_mjx.envs.config import EnvConfig, _number, _positive
+from dpc_mjx.envs.disturbances import NEVER
+from dpc_mjx.robots import props
+from dpc_mjx.robots.assemble import HOME_KEY
+from dpc_mjx.robots.variants import Arm, RobotSpec
+
+APPROACH_HEIGHT = 0.06  # m, grasp site above the ball before grasping and after releasing
+LIFT_HEIGHT = 0.10  # m, ball above its rest height while carried
+PLACE_CLEARANCE = 0.01  # m, ball above its rest height when released
+APPROACH_Z = -0.7  # world z of the gripper's approach axis (about 45 deg down), soft
+FINGER_CLOSED = 0.004  # m: jaws 0.044 - 0.004 = 0.04 m apart, the ball's diameter
+REST_TOL = 0.01  # m, ball centre from its rest height on the target table for `ball_on_target`
+# Move indices of the script (see the module doc).
+_CLOSE, _LIFT, _RELEASE = 2, 3, 6
+
+
+@dataclasses.dataclass(frozen=True)
+class CarryingConfig(EnvConfig):
+    """`EnvConfig` plus the carrying script."""
+
+    grasp_threshold: float = 0.03  # m, grasp site to ball centre to switch the weld on
+    robot_x: float = 0.15  # m, world x of the trunk at reset (tables span x 0.40-0.70)
+    start_time: float = 0.5  # s standing before the first move
+    move_time: float = 1.0  # s per move
+    hold_time: float = 0.25  # s pause after each move
+
+    def validate(self) -> None:
+        super().validate()
+        _number("robot_x", self.robot_x, low=-0.5, high=0.3)
+        _number("start_time", self.start_time, low=0.0)
+        _number("hold_time", self.hold_time, low=0.0)
+        for name in ("grasp_threshold", "move_time"):
+            _positive(name, getattr(self, name))
+
+
+def default_config() -> CarryingConfig:
+    """Stand (trot in place, command 0) while the arm carries; no pushes, no payload; 13 s."""
+    return CarryingConfig(
+        command_vx=(0.0, 0.0),
+        command_vy=(0.0, 0.0),
+        command_yaw=(0.0, 0.0),
+        command_switch=(NEVER, NEVER),
+        push_force=(0.0, 0.0),
+        payload_mass=(0.0, 0.0),
+        episode_length=650,
+    )
+
+
+class CarryingEnv(DpcEnv):
+    """Carrying: see the module doc."""
+
+    TASK = "carrying"
+
+    def __init__(self, config: CarryingConfig, arm: str | Arm | RobotSpec | None = None):
+        super().__init__(config, arm)
+        model, p = self.model, self.props
+        shift = p.table_tops[1] - p.table_tops[0]  # source -> target table
+        rest = np.array([model.key_qpos[0][b.qpos[:3]] for b in p.balls])  # (k, 3) m
+        self.place = (rest + shift).astype(np.float32)  # (k, 3) rest points on the target
+        data = scripts.standing_data(model, config.robot_x)
+        home = np.asarray(model.key_ctrl[0][self.lay.arm_act], np.float32)
+        per_arm = [self._waypoints(data, k, rest[k], self.place[k]) for k in range(len(p.balls))]
+        waypoints = [home] + [np.concatenate(w) for w in zip(*per_arm, strict=True)] + [home]
+        self.script = scripts.Script.through(
+            waypoints, config.start_time, config.move_time, config.hold_time
+        )
+        # s: the grasp window [t_close, t_lift) and the release (weld off from t_release)
+        self.t_close = float(self.script.start[_CLOSE])
+        self.t_lift = float(self.script.start[_LIFT])
+        self.t_release = float(self.script.start[_RELEASE])
+        self._ball_qpos = np.array([b.qpos[:3] for b in p.balls])  # (k, 3)
+        self._target_lo = p.table_tops[1, :2] - props.TABLE_HALF  # (2,) m, target top, x-y box
+        self._target_hi = p.table_tops[1, :2] + props.TABLE_HALF
+
+    def _waypoints(self, data, k: int, ball: np.ndarray, place: np.ndarray) -> list[np.ndarray]:
+        """Servo targets of arm k at the 8 waypoints between home and home (see the module doc)."""
+        arm, site = self.lay.arms[k], int(self.props.grasp_sites[k])
+        up = np.array([0.0, 0.0, 1.0])
+        poses = []
+        for name, pos in (
+            ("pre-grasp", ball + APPROACH_HEIGHT * up),
+            ("grasp", ball),
+            ("lift", ball + LIFT_HEIGHT * up),
+            ("carry", place + LIFT_HEIGHT * up),
+            ("place", place + PLACE_CLEARANCE * up),
+            ("retreat", place + APPROACH_HEIGHT * up),
+        ):
+            poses.append(scripts.solve_ik(self.model, data, arm, site, pos, APPROACH_Z, what=name))
+        finger = np.zeros(len(arm.act), np.float32)
+        finger[-1] = FINGER_CLOSED  # the gripper is the arm's last joint
+        pre, grasp, lift, carry, place_, retreat = poses
+        return [
+            pre,
+            grasp,
+            grasp + finger,
+            lift + finger,
+            carry + finger,
+            place_ + finger,
+            place_,
+            retreat,
+        ]
+
+    def build_model(self, arm: str | Arm | RobotSpec | None) -> mujoco.MjModel:
+        spec = props.task_spec(self.TASK, arm)
+        key = spec.key(HOME_KEY)
+        qpos = list(key.qpos)
+        qpos[0] = self.config.robot_x  # the trunk's x
+        key.qpos = qpos
+        return spec.compile()
+
+    @classmethod
+    def check_arm(cls, robot: RobotSpec) -> None:
+        scripts.check_task_arms(cls.TASK, robot, gripper=True)
+
+    def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
+        del dist, d
+        return self.script.targets(t)
+
+    def task_physics(self, d, t: jax.Array):
+        gaps = props.grasp_gaps(d, self.props)  # (k,) m
+        window = (t >= self.t_close) & (t < self.t_lift)
+        held = d.eq_active[self.props.welds] | (window & (gaps < self.config.grasp_threshold))
+        return props.set_welds(d, self.props, held & (t < self.t_release))
+
+    def task_metrics(self, d) -> dict[str, jax.Array]:
+        balls = d.qpos[self._ball_qpos]  # (k, 3) m
+        held = d.eq_active[self.props.welds]
+        inside = jp.all((balls[:, :2] >= self._target_lo) & (balls[:, :2] <= self._target_hi), 1)
+        resting = jp.abs(balls[:, 2] - self.place[:, 2]) < REST_TOL
+        return {
+            "ball_target_dist": jp.mean(jp.linalg.norm(balls - self.place, axis=1)),
+            "ball_on_target": jp.mean(inside & resting & ~held),
+            "grasped": jp.mean(held.astype(jp.float32)),
+        }
+
+
+class CarryingHighEnv(CarryingEnv):
+    """Carrying between 0.45 m tables (`props.TABLE_HEIGHT_HIGH`); default arm `longer`."""
+
+    TASK = "carrying_high"
