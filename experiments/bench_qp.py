@@ -6,15 +6,22 @@ apart, median wall time of several calls (block_until_ready). Accuracy: relative
 |J - J*| / max(1, |J*|) and constraint violation max(Gx - h, 0) / max(1, |h|_inf) against OSQP in
 float64 with eps 1e-9 and polishing, on the first problems of the batch.
 
+Rows "ours" run `jax.vmap(qp.solve)` (the batch-minor kernel); the "default vmap layout" row runs
+the same code vmapped the default way (`qp._solve_reference`); `--previous` adds a row for another
+version of qp.py, e.g. `git show <rev>:dpc_mjx/control/qp.py > /tmp/qp_prev.py`.
+
     .venv/bin/python experiments/bench_qp.py           # full (~2-3 min on 2 cores)
     .venv/bin/python experiments/bench_qp.py --quick   # smoke run (~40 s)
+    .venv/bin/python experiments/bench_qp.py --previous /tmp/qp_prev.py
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import os
+import sys
 import time
 from collections.abc import Callable
 
@@ -130,6 +137,17 @@ def boxosqp_fn():
 
 QPAX, BOX = "qpax (30 it, tol 1e-5)", "jaxopt BoxOSQP (tol 1e-3)"
 OURS, OURS8 = "ours (qp.solve, 10 it)", "ours, 8 it"
+REF = "ours, default vmap layout (qp._solve_reference)"  # same code, batch on the leading axis
+PREV = "previous qp.py (--previous)"
+
+
+def load_solve(path: str) -> Callable:
+    """`solve` of a qp.py loaded from path (another version of the solver)."""
+    spec = importlib.util.spec_from_file_location("qp_previous", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return lambda *a: module.solve(*a).x
 
 
 @dataclasses.dataclass
@@ -195,14 +213,18 @@ def print_tables(bench: Bench) -> None:
         c = "-" if compile_s is None else f"{compile_s:.1f}"
         print(f"| {name} | {b} | {c} | {us:.2f} | {1e6 / us:,.0f} | {osqp_us / us:.1f}x |")
 
-    print("\n| speed-up of ours (10 it) at batch | vs qpax | vs BoxOSQP |")
-    print("|---:|---:|---:|")
+    print(
+        "\n| speed-up of ours (10 it) at batch | vs default vmap layout | vs previous qp.py "
+        "| vs qpax | vs BoxOSQP |"
+    )
+    print("|---:|---:|---:|---:|---:|")
     for b in sorted({b for (name, b) in per_batch if name == OURS}):
         ours = per_batch[OURS, b]
         cells = [
-            f"{per_batch[o, b] / ours:.1f}x" if (o, b) in per_batch else "-" for o in (QPAX, BOX)
+            f"{per_batch[o, b] / ours:.1f}x" if (o, b) in per_batch else "-"
+            for o in (REF, PREV, QPAX, BOX)
         ]
-        print(f"| {b} | {cells[0]} | {cells[1]} |")
+        print(f"| {b} | {' | '.join(cells)} |")
 
     print("\nAccuracy vs OSQP float64 (eps 1e-9, polished) on the first n problems of the batch\n")
     print("| solver | n | gap median | gap max | max violation |")
@@ -217,6 +239,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small batches, few repeats")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--previous", help="path of another qp.py to benchmark as one more row")
     args = parser.parse_args()
 
     ours_batches = (1, 256, 1024) if args.quick else (1, 256, 1024, 4096)
@@ -234,6 +257,8 @@ def main() -> None:
     solvers = {
         OURS: (qp.solve, ours_batches),
         OURS8: (lambda *a: qp.solve(*a, settings=qp.QPSettings(iterations=8)), ours_batches[-1:]),
+        REF: (qp._solve_reference, base_batches),
+        **({PREV: (load_solve(args.previous), base_batches)} if args.previous else {}),
         QPAX: (qpax_fn(), base_batches),
         BOX: (boxosqp_fn(), base_batches),
     }

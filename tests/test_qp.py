@@ -16,6 +16,7 @@ import pytest
 import scipy.sparse as sp
 
 from dpc_mjx.control import qp
+from dpc_mjx.errors import DpcError
 
 N_PROBLEMS = 600  # random QPs of the controller's size
 N_VARS, N_ROWS = 12, 24
@@ -30,6 +31,12 @@ _DUAL_FEASIBILITY_TOL = 0.0  # min z >= -tol (the method keeps z > 0)
 _CONVERGED_FRACTION = 0.99  # share of problems whose `converged` flag is set
 _TIGHT_PAIR_TOL = 1e-3  # |x| of the problem whose bounds pin x = 0
 _WARM_ITERATION_RATIO = 0.7  # mean iterations to tolerance, warm / cold
+# vmap runs the batch-minor chunked kernel, a single call the same code with no batch axis: the
+# same float32 operations, fused differently by XLA (measured identical on these problems).
+_LAYOUT_TOL = 1e-4  # |x_a - x_b|_inf / max(1, |x_b|_inf), and the same for the objective
+# Inside a scan XLA fuses differently again, and warm starts amplify the rounding differences up
+# to the solver's own tolerance (eps_rel 1e-3): measured up to 1.1e-4.
+_WARM_CHAIN_TOL = 1e-3
 
 
 def random_qps(n_prob: int, seed: int) -> tuple[np.ndarray, ...]:
@@ -266,3 +273,76 @@ def test_batch_is_traced_once(random_problems):
     _solve_batch(args[0] * 2.0, *args[1:]).x.block_until_ready()
     assert after_first - before <= 1  # 0 if an earlier test already traced this shape
     assert len(_TRACES) == after_first
+
+
+def _assert_same_results(a: qp.QPResult, b: qp.QPResult, tol: float) -> None:
+    """a and b (same batch shape) agree: x and objective within tol (relative, scale >= 1),
+    the flags exactly, the iteration counts within one."""
+    xa, xb = np.asarray(a.x, np.float64), np.asarray(b.x, np.float64)
+    scale = np.maximum(1.0, np.abs(xb).max(-1))
+    assert np.all(np.abs(xa - xb).max(-1) <= tol * scale), np.abs(xa - xb).max()
+    ja, jb = np.asarray(a.objective, np.float64), np.asarray(b.objective, np.float64)
+    assert np.all(np.abs(ja - jb) <= tol * np.maximum(1.0, np.abs(jb)))
+    for flag in ("valid", "converged"):
+        assert np.array_equal(np.asarray(getattr(a, flag)), np.asarray(getattr(b, flag))), flag
+    assert np.abs(np.asarray(a.iterations) - np.asarray(b.iterations)).max() <= 1
+
+
+def test_vmap_matches_single_calls(random_problems):
+    """The batched kernel (two chunks, the second padded) against unbatched calls, per problem."""
+    P, q, G, h, _ = random_problems
+    k = qp._CHUNK + 3
+    args = [jp.asarray(a[:k], jp.float32) for a in (P, q, G, h)]
+    batched = jax.jit(jax.vmap(qp.solve))(*args)
+    single = jax.jit(qp.solve)
+    singles = [single(*(a[i] for a in args)) for i in range(k)]
+    _assert_same_results(batched, jax.tree.map(lambda *r: jp.stack(r), *singles), _LAYOUT_TOL)
+
+
+def test_nested_vmap_and_shared_arguments(random_problems):
+    """vmap of vmap is one batch; an argument shared by the batch (in_axes None) is broadcast."""
+    P, q, G, h, _ = random_problems
+    args = [jp.asarray(a[:6], jp.float32) for a in (P, q, G, h)]
+    flat = jax.jit(jax.vmap(qp.solve))(*args)
+    nested = jax.jit(jax.vmap(jax.vmap(qp.solve)))(*(a.reshape((2, 3, *a.shape[1:])) for a in args))
+    assert nested.x.shape == (2, 3, N_VARS) and nested.valid.shape == (2, 3)
+    _assert_same_results(jax.tree.map(lambda a: a.reshape((6, *a.shape[2:])), nested), flat, 0.0)
+
+    shared = jax.vmap(qp.solve, in_axes=(None, 0, None, 0))(
+        args[0][0], args[1], args[2][0], args[3]
+    )
+    tiled = [jp.broadcast_to(args[0][0], args[0].shape), args[1]]
+    tiled += [jp.broadcast_to(args[2][0], args[2].shape), args[3]]
+    _assert_same_results(shared, jax.vmap(qp.solve)(*tiled), 0.0)
+
+
+def test_warm_started_scan_under_vmap(random_problems):
+    """The controller's pattern, jit(vmap(scan(solve warm-started from the previous result))),
+    against the same steps as single calls."""
+    P, q, G, h, _ = random_problems
+    args = [jp.asarray(a[:4], jp.float32) for a in (P, q, G, h)]
+    scales = jp.array([1.0, 1.01, 0.99])  # q changes by 1 % per step
+
+    def run(P, q, G, h):
+        def step(prev, scale):
+            res = qp.solve(P, q * scale, G, h, warm_start=prev)
+            return res, res
+
+        return jax.lax.scan(step, qp.solve(P, q, G, h), scales)[1]
+
+    batched = jax.jit(jax.vmap(run))(*args)  # fields (4, 3, ...)
+    single = jax.jit(lambda P, q, G, h, w: qp.solve(P, q, G, h, warm_start=w))
+    for i in range(4):
+        prev = jax.jit(qp.solve)(*(a[i] for a in args))
+        for t, scale in enumerate(np.asarray(scales)):
+            prev = single(args[0][i], args[1][i] * scale, args[2][i], args[3][i], prev)
+            step = jax.tree.map(lambda a, i=i, t=t: a[i, t], batched)
+            _assert_same_results(step, prev, _WARM_CHAIN_TOL)
+
+
+def test_batch_shapes_are_rejected_outside_vmap():
+    n, m = N_VARS, N_ROWS
+    with pytest.raises(DpcError, match="jax.vmap"):
+        qp.solve(jp.zeros((2, n, n)), jp.zeros((2, n)), jp.zeros((2, m, n)), jp.zeros((2, m)))
+    with pytest.raises(DpcError, match="one problem"):
+        qp.solve(jp.eye(n), jp.zeros(n), jp.zeros((m, n + 1)), jp.zeros(m))

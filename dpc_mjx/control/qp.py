@@ -20,24 +20,41 @@ Method (docs/decisions.md has the choice and the tuning, docs/benchmarks.md the 
   * A fixed number of iterations (lax.scan), no data-dependent control flow: every problem of a
     batch costs the same; jit- and vmap-able; warm-startable from a previous QPResult.
 
-Cost per iteration (n = 12, m = 24): H (m n(n+1)/2 = 1872 MACs), the Cholesky (~n^3/6), two pairs
-of triangular solves, seven matvecs with P, G or G'. Matvecs are written as multiply + reduce and
-the linear algebra as unrolled static slices, which XLA:CPU runs faster under vmap than batched
-dots, gathers or LAPACK calls at this size.
+Layout. The method is written once, for arrays whose trailing axes are batch axes (`...`):
+P (n, n, ...), q (n, ...), G (m, n, ...), a per-problem scalar (...). Along the small leading
+axes it uses static slices only (unrolled matvecs, Cholesky and substitutions, pairwise folds
+instead of reductions), so every op is elementwise over the batch. A single call runs it with no
+batch axis. Under `jax.vmap`, a batching rule (`jax.custom_batching.custom_vmap`) moves the batch
+to the last, contiguous axis and runs the same code on chunks of `_CHUNK` = 64 problems, one
+after the other (`lax.map`): each XLA:CPU loop is then a SIMD loop over 64 problems, and a chunk's
+data (~10 KB per problem) stay in the L2 cache. Arguments the vmap does not batch are broadcast;
+nested vmaps are merged into one batch. `_pin` marks the values that XLA:CPU would otherwise
+recompute inside every consumer. `_solve_reference` is the same code vmapped the default way
+(the batch on the leading axis), for the benchmark. custom_vmap has no reverse-mode autodiff;
+nothing differentiates through the solver.
+
+Cost per iteration (n = 12, m = 24): H from the stored row products G_ri G_rj (m n(n+1)/2 = 1872
+multiply-adds), the Cholesky (~n^3/6), two pairs of triangular solves, six matvecs with P, G or
+G'. In the batched kernel that is ~11k float ops per problem and iteration, ~0.35 us at batch
+4096 on one core (docs/benchmarks.md).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jp
 import numpy as np
 
+from dpc_mjx.errors import DpcError
+
 _TINY = 1e-30  # keeps divisions finite (fits float32)
 _BIG = 1e30  # clamp of z/s (fits float32)
 _NORM_MIN = 1e-12  # a zero row or column is left unscaled by the equilibration
+_CHUNK = 64  # problems per chunk of the batched kernel (docs/decisions.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,161 +118,268 @@ class QPResult:
     valid: jax.Array
 
 
-def _equilibrate(P: jax.Array, G: jax.Array, sweeps: int) -> tuple[jax.Array, jax.Array]:
-    """Ruiz scaling D (n,), E (m,) making the columns of [P G'; G 0] of unit inf-norm."""
-    n, m = P.shape[0], G.shape[0]
-    d, e = jp.ones(n, P.dtype), jp.ones(m, P.dtype)
+# ---------------------------------------------------------------------------------------------
+# Helpers along the small leading axes; the trailing axes (...) are batch axes.
+
+
+def _pin(x: jax.Array, one: jax.Array) -> jax.Array:
+    """x itself (x / 1 is exact), computed once.
+
+    XLA:CPU fuses a cheap expression into every consumer and recomputes it there, once per
+    element: a per-problem value broadcast over an (m, ...) vector, or a vector read by a
+    matvec, is recomputed m times, and chains of these multiply (up to 100x slower, measured).
+    It does not do so with a float divide by a value it cannot fold, so dividing by `one` (a
+    runtime array of ones) makes it compute x into memory once. A pinned value must not be
+    divided nor divide: XLA rewrites (x / one) / y as x / (one y), which undoes the pin; hence
+    the reciprocals in _Scaled.
+    """
+    return x / one
+
+
+def _pin_flag(b: jax.Array, one: jax.Array) -> jax.Array:
+    """A bool (...) computed once (see _pin)."""
+    return _pin(jp.where(b, one, 0.0), one) > 0.5
+
+
+def _fold(fn, v: jax.Array, axis: int = 0) -> jax.Array:
+    """Reduce `axis` of v by the binary fn with a halving tree of static slices.
+
+    XLA:CPU emits a reduction over a non-minor axis as a scalar loop; this stays elementwise
+    over the batch (and vectorised).
+    """
+    while v.shape[axis] > 1:
+        k = v.shape[axis]
+        half = k // 2
+        head = fn(
+            jax.lax.slice_in_dim(v, 0, half, axis=axis),
+            jax.lax.slice_in_dim(v, half, 2 * half, axis=axis),
+        )
+        odd = jax.lax.slice_in_dim(v, 2 * half, k, axis=axis)
+        v = jp.concatenate([head, odd], axis=axis) if k % 2 else head
+    return jp.squeeze(v, axis)
+
+
+def _sum(v: jax.Array, axis: int = 0) -> jax.Array:
+    return _fold(jp.add, v, axis)
+
+
+def _max(v: jax.Array, axis: int = 0) -> jax.Array:
+    return _fold(jp.maximum, v, axis)
+
+
+def _dot(a: jax.Array, b: jax.Array) -> jax.Array:
+    return _sum(a * b)
+
+
+def _inf_norm(v: jax.Array) -> jax.Array:
+    return _max(jp.abs(v))
+
+
+def _all_finite(v: jax.Array, axes: int = 1) -> jax.Array:
+    """(...) bool: all entries of the leading `axes` axes of v are finite.
+
+    v * 0 is 0 where v is finite and NaN where not, so the sum says it; this float formulation
+    runs 2x faster on XLA:CPU than folding isfinite with logical_and.
+    """
+    zeros = v * 0.0
+    for _ in range(axes):
+        zeros = _sum(zeros)
+    return jp.isfinite(zeros)
+
+
+def _mv(A: jax.Array, x: jax.Array) -> jax.Array:
+    """A x for A (m, n, ...), x (n, ...) -> (m, ...), unrolled over n."""
+    out = A[:, 0] * x[0]
+    for j in range(1, A.shape[1]):
+        out = out + A[:, j] * x[j]
+    return out
+
+
+def _mtv(A: jax.Array, y: jax.Array) -> jax.Array:
+    """A' y for A (m, n, ...), y (m, ...) -> (n, ...), unrolled over m."""
+    out = A[0] * y[0]
+    for i in range(1, A.shape[0]):
+        out = out + A[i] * y[i]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The method.
+
+
+def _diagonal_factor(k: int, regularization: float, like: jax.Array) -> jax.Array:
+    """(k, 1, ...) constant of like's dtype: 1 + regularization first (the diagonal), then 1."""
+    f = np.ones(k)
+    f[0] += regularization
+    return jp.asarray(f, like.dtype).reshape((k,) + (1,) * (like.ndim - 1))
+
+
+def _equilibrate(P: jax.Array, G: jax.Array, sweeps: int, one: jax.Array):
+    """Ruiz scaling D (n, ...), E (m, ...) making the columns of [P G'; G 0] of unit inf-norm.
+
+    P and G are finite here, so no NaN can arise and a compare-select maximum (half the cost
+    of the NaN-propagating jp.maximum on XLA:CPU) gives the same result.
+    """
+
+    def col_max(v, axis=0):
+        return _fold(lambda a, b: jp.where(a > b, a, b), v, axis)
+
+    d = jp.ones_like(P[0])
+    e = jp.ones_like(G[:, 0])
     for _ in range(sweeps):
         ps = jp.abs(P) * (d[:, None] * d[None, :])
-        gs = jp.abs(G) * (e[:, None] * d[None, :])
-        col = jp.maximum(jp.max(ps, axis=0), jp.max(gs, axis=0))  # (n,)
-        row = jp.max(gs, axis=1)  # (m,)
-        d = d / jp.sqrt(jp.where(col > _NORM_MIN, col, 1.0))
-        e = e / jp.sqrt(jp.where(row > _NORM_MIN, row, 1.0))
+        gs = _pin(jp.abs(G) * (e[:, None] * d[None, :]), one)  # else XLA splits it over threads
+        col = jp.maximum(col_max(ps), col_max(gs))  # (n, ...)
+        row = col_max(gs, axis=1)  # (m, ...)
+        d = _pin(d * jax.lax.rsqrt(jp.where(col > _NORM_MIN, col, 1.0)), one)
+        e = _pin(e * jax.lax.rsqrt(jp.where(row > _NORM_MIN, row, 1.0)), one)
     return d, e
 
 
-def _cholesky(H: jax.Array, floor: float) -> list[tuple[jax.Array, jax.Array]]:
-    """Unrolled right-looking Cholesky H = L L' of an (n, n) matrix.
+def _cholesky(columns: list[jax.Array], floor: float) -> list[tuple[jax.Array, jax.Array]]:
+    """Unrolled right-looking Cholesky H = L L' from the columns H[j:, j] (n - j, ...).
 
-    Returns the columns of L as (L_jj (), L[j+1:, j] (n-j-1,)). A pivot below floor * H_jj is
-    raised to it, so the factor always exists (a regularised factor of a near-singular H).
+    Returns the columns of L as (L_jj (...), L[j+1:, j] (n-j-1, ...)). A pivot below
+    floor * H_jj is raised to it, so the factor always exists (a regularised factor of a
+    near-singular H). Only the lower triangle is read.
     """
-    n = H.shape[0]
-    h_diag = jp.diagonal(H)
-    cols = []
-    S = H  # trailing Schur complement, shrinks by one each step
+    n = len(columns)
+    h_diag = [c[0] for c in columns]
+    trailing = list(columns)  # column k of the trailing Schur complement, rows k: (n - k, ...)
+    out = []
     for j in range(n):
-        d = jp.sqrt(jp.maximum(S[0, 0], floor * h_diag[j] + _TINY))
-        c = S[1:, 0] / d
-        cols.append((d, c))
-        if j < n - 1:
-            S = S[1:, 1:] - c[:, None] * c[None, :]
-    return cols
+        col = trailing[j]
+        d = jp.sqrt(jp.maximum(col[0], floor * h_diag[j] + _TINY))
+        c = col[1:] / d
+        out.append((d, c))
+        for k in range(j + 1, n):
+            trailing[k] = trailing[k] - c[k - j - 1] * c[k - j - 1 :]
+    return out
 
 
-def _cho_solve(cols: list[tuple[jax.Array, jax.Array]], b: jax.Array) -> jax.Array:
-    """Solve L L' x = b for b (n,), with L given column-wise by `_cholesky`."""
-    n = len(cols)
+def _cho_solve(chol: list[tuple[jax.Array, jax.Array]], b: jax.Array) -> jax.Array:
+    """Solve L L' x = b for b (n, ...), with L given column-wise by `_cholesky`."""
+    n = len(chol)
     y, r = [], b
     for j in range(n):  # forward: L y = b, column-oriented
-        d, c = cols[j]
+        d, c = chol[j]
         y.append(r[0] / d)
         r = r[1:] - c * y[j]
     x = [None] * n
     for j in reversed(range(n)):  # backward: L' x = y, row-oriented
-        d, c = cols[j]
-        x[j] = y[j] / d if j == n - 1 else (y[j] - jp.sum(c * jp.stack(x[j + 1 :]))) / d
+        d, c = chol[j]
+        acc = y[j]
+        for k in range(j + 1, n):
+            acc = acc - c[k - j - 1] * x[k]
+        x[j] = acc / d
     return jp.stack(x)
 
 
 def _max_step(v: jax.Array, dv: jax.Array) -> jax.Array:
-    """Largest a in [0, 1] with v + a dv >= 0 (v > 0)."""
+    """Largest a in [0, 1] with v + a dv >= 0 (v > 0), per problem."""
     neg = dv < 0
     ratio = jp.where(neg, v / jp.where(neg, -dv, 1.0), 1.0)
-    return jp.minimum(1.0, jp.min(ratio))
-
-
-def _inf_norm(v: jax.Array) -> jax.Array:
-    return jp.max(jp.abs(v))
-
-
-def _mv(A: jax.Array, x: jax.Array) -> jax.Array:
-    """A x as multiply + reduce: XLA:CPU fuses this; a batched dot of this size is slower."""
-    return jp.sum(A * x[None, :], axis=1)
-
-
-def _mtv(A: jax.Array, y: jax.Array) -> jax.Array:
-    """A' y as multiply + reduce."""
-    return jp.sum(A * y[:, None], axis=0)
+    return jp.minimum(1.0, _fold(jp.minimum, ratio))
 
 
 class _Scaled(NamedTuple):
     """The sanitised problem in equilibrated units: x = d * xs, Gs = E G D, cost times c."""
 
-    P: jax.Array  # (n, n) sanitised original P (for the objective)
-    q: jax.Array  # (n,) sanitised original q
-    h: jax.Array  # (m,) sanitised original h
-    Ps: jax.Array  # (n, n) c D P D
-    qs: jax.Array  # (n,) c D q
-    Gs: jax.Array  # (m, n) E G D
-    hs: jax.Array  # (m,) E h
-    d: jax.Array  # (n,) variable scaling D
-    e: jax.Array  # (m,) row scaling E
-    c: jax.Array  # () cost scaling
-    g_abs: jax.Array  # () max_j sum_i |Gs_ij| / d_j, bounds |G|'|z| in original units (times c)
-    finite: jax.Array  # () bool, the input was finite
+    P: jax.Array  # (n, n, ...) sanitised original P (for the objective)
+    q: jax.Array  # (n, ...) sanitised original q
+    h: jax.Array  # (m, ...) sanitised original h
+    Ps: jax.Array  # (n, n, ...) c D P D
+    qs: jax.Array  # (n, ...) c D q
+    Gs: jax.Array  # (m, n, ...) E G D
+    hs: jax.Array  # (m, ...) E h
+    d: jax.Array  # (n, ...) variable scaling D
+    e: jax.Array  # (m, ...) row scaling E
+    c: jax.Array  # (...) cost scaling
+    inv_d: jax.Array  # (n, ...) 1 / d
+    inv_e: jax.Array  # (m, ...) 1 / e
+    inv_c: jax.Array  # (...) 1 / c
+    g_abs: jax.Array  # (...) max_j sum_i |Gs_ij| / d_j, bounds |G|'|z| in original units (times c)
+    norms: jax.Array  # (2, ...) ||h||_inf, ||q||_inf (original units)
+    finite: jax.Array  # (...) bool, the input was finite
+    one: jax.Array  # (...) ones, for _pin
+    p_cols: list  # columns Ps[j:, j] (n - j, ...), the diagonal entry times (1 + reg)
+    gg_cols: list  # row products Gs_rj Gs_ri, i >= j (m, n - j, ...), the diagonal times (1 + reg)
 
 
 def _prepare(P, q, G, h, cfg: QPSettings) -> _Scaled:
     """Sanitise (a non-finite problem becomes min 1/2|x|^2 s.t. 0 <= 1, flagged) and scale."""
-    dtype = jp.result_type(P, q, G, h, jp.float32)
-    P, q, G, h = (jp.asarray(a, dtype) for a in (P, q, G, h))
-    finite = jp.all(jp.isfinite(P)) & jp.all(jp.isfinite(q))
-    finite &= jp.all(jp.isfinite(G)) & jp.all(jp.isfinite(h))
-    P = jp.where(finite, 0.5 * (P + P.T), jp.eye(q.shape[0], dtype=dtype))
+    n = q.shape[0]
+    # a runtime 1 (...) that XLA cannot fold (see _pin), cheap to recompute
+    one = 1.0 + 0.0 * jp.isfinite(q[0]).astype(q.dtype)
+    finite = _all_finite(P, 2) & _all_finite(q) & _all_finite(G, 2) & _all_finite(h)
+    finite = _pin_flag(finite, one)
+    eye = jp.eye(n, dtype=q.dtype).reshape((n, n) + (1,) * (q.ndim - 1))
+    P = jp.where(finite, 0.5 * (P + jp.swapaxes(P, 0, 1)), eye)
     q = jp.where(finite, q, 0.0)
     G = jp.where(finite, G, 0.0)
     h = jp.where(finite, h, 1.0)
 
-    d, e = _equilibrate(P, G, cfg.ruiz_iterations)
+    d, e = _equilibrate(P, G, cfg.ruiz_iterations, one)
     Ps = P * (d[:, None] * d[None, :])
     qs = q * d
-    Gs = G * (e[:, None] * d[None, :])
-    cost_norm = jp.maximum(jp.mean(jp.max(jp.abs(Ps), axis=0)), _inf_norm(qs))
-    c = 1.0 / jp.clip(cost_norm, 1e-4, 1e6)
-    g_abs = jp.max(jp.sum(jp.abs(Gs), axis=0) / d)
-    return _Scaled(P, q, h, Ps * c, qs * c, Gs, h * e, d, e, c, g_abs, finite)
+    Gs = _pin(G * (e[:, None] * d[None, :]), one)  # read by every matvec and row product
+    cost_norm = jp.maximum(_sum(_max(jp.abs(Ps))) / n, _inf_norm(qs))
+    c = _pin(1.0 / jp.clip(cost_norm, 1e-4, 1e6), one)
+    # reciprocals, so that no pinned value is divided (XLA would merge the two divides, see _pin)
+    inv_d, inv_e, inv_c = (_pin(1.0 / v, one) for v in (d, e, c))
+    g_abs = _pin(_max(_sum(jp.abs(Gs)) * inv_d), one)
+    norms = _pin(jp.stack([_inf_norm(h), _inf_norm(q)]), one)
+    Ps, qs = Ps * c, qs * c
+    # H = Ps + Gs' diag(w) Gs is assembled by columns from the products of the rows of Gs.
+    p_cols, gg_cols = [], []
+    for j in range(n):
+        diag = _diagonal_factor(n - j, cfg.regularization, q)  # (n - j, 1, ...)
+        p_cols.append(Ps[j:, j] * diag)
+        gg_cols.append(Gs[:, j:] * Gs[:, j : j + 1] * diag)
+    hs = h * e
+    inverses = (inv_d, inv_e, inv_c)
+    return _Scaled(
+        P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, gg_cols
+    )
 
 
-def _normal_matrix_fn(pr: _Scaled, cfg: QPSettings):
-    """w (m,) -> the lower triangle of H = Ps + Gs' diag(w) Gs, times (1 + reg) on the diagonal.
-
-    Column j below the diagonal is Ps[j:, j] + Gs[:, j:]' (w * Gs[:, j]): m n(n+1)/2 MACs in all,
-    with static slices only (a gather is slow under vmap on XLA:CPU; a stored table of the row
-    products G_ri G_rj costs more memory traffic than it saves). `_cholesky` reads only the lower
-    triangle, so the upper one is left zero.
-    """
-    n = pr.qs.shape[0]
-    diag = 1.0 + cfg.regularization * jp.eye(n, dtype=pr.Ps.dtype)
-    offs = np.concatenate([[0], np.cumsum(np.arange(n, 0, -1))])
-    Pc = jp.concatenate([pr.Ps[j:, j] for j in range(n)])
-
-    def normal_matrix(w: jax.Array) -> jax.Array:
-        wg = w[:, None] * pr.Gs  # (m, n)
-        Hp = Pc + jp.concatenate([jp.sum(pr.Gs[:, j:] * wg[:, j : j + 1], 0) for j in range(n)])
-        H = jp.stack([jp.pad(Hp[offs[j] : offs[j] + n - j], (j, 0)) for j in range(n)], axis=1)
-        return H * diag
-
-    return normal_matrix
+def _normal_columns(pr: _Scaled, w: jax.Array) -> list[jax.Array]:
+    """w (m, ...) -> the columns H[j:, j] (n - j, ...) of H = Ps + Gs' diag(w) Gs, with the
+    diagonal times (1 + regularization): m n(n+1)/2 multiply-adds from the row products."""
+    columns = []
+    for p_col, gg in zip(pr.p_cols, pr.gg_cols, strict=True):
+        col = p_col
+        for r in range(w.shape[0]):
+            col = col + gg[r] * w[r]
+        columns.append(col)
+    return columns
 
 
-def _start(pr: _Scaled, normal_matrix, warm_start: QPResult | None, cfg: QPSettings):
+def _start(pr: _Scaled, warm, cfg: QPSettings):
     """Starting (x, s, z) in equilibrated units.
 
     Cold: x minimises 1/2 x'Px + q'x + 1/2 |Gx - h|^2, s = max(h - Gx, 1), z = 1.
     Warm: the previous x, s = h - Gx lifted to >= warm_margin (1 + |h_i|), the previous z lifted
     to >= warm_margin (1 + max z) (equilibrated units).
     """
-    m = pr.hs.shape[0]
-    chol = _cholesky(normal_matrix(jp.ones(m, pr.hs.dtype)), cfg.pivot_floor)
+    chol = _cholesky(_normal_columns(pr, jp.ones_like(pr.hs)), cfg.pivot_floor)
     x0 = _cho_solve(chol, -pr.qs + _mtv(pr.Gs, pr.hs))
     s0 = jp.maximum(pr.hs - _mv(pr.Gs, x0), 1.0)
-    z0 = jp.ones(m, pr.hs.dtype)
-    if warm_start is None:
+    z0 = jp.ones_like(pr.hs)
+    if warm is None:
         return x0, s0, z0
-    use = warm_start.valid & pr.finite
-    use &= jp.all(jp.isfinite(warm_start.x)) & jp.all(jp.isfinite(warm_start.z))
-    xw = jp.nan_to_num(warm_start.x.astype(x0.dtype)) / pr.d
-    zw = jp.nan_to_num(warm_start.z.astype(x0.dtype)) * pr.c / pr.e
+    wx, wz, wvalid = warm
+    use = _pin_flag(wvalid & pr.finite & _all_finite(wx) & _all_finite(wz), pr.one)
+    xw = _pin(jp.nan_to_num(wx.astype(x0.dtype)) * pr.inv_d, pr.one)
+    zw = jp.nan_to_num(wz.astype(x0.dtype)) * pr.c * pr.inv_e
     # lift both off the boundary, relative to their own scales
     sw = jp.maximum(pr.hs - _mv(pr.Gs, xw), cfg.warm_margin * (1.0 + jp.abs(pr.hs)))
-    zw = jp.maximum(zw, cfg.warm_margin * (1.0 + jp.max(zw)))
+    zw = jp.maximum(zw, cfg.warm_margin * (1.0 + _pin(_max(zw), pr.one)))
     return tuple(jp.where(use, a, b) for a, b in ((xw, x0), (sw, s0), (zw, z0)))
 
 
 class _Iterate(NamedTuple):
-    """Interior-point iterate in equilibrated units: x (n,), s (m,), z (m,) and gx = Gs x (m,)."""
+    """Iterate in equilibrated units: x (n, ...), s (m, ...), z (m, ...) and gx = Gs x (m, ...)."""
 
     x: jax.Array
     s: jax.Array
@@ -264,7 +388,7 @@ class _Iterate(NamedTuple):
 
 
 class _Figures(NamedTuple):
-    """Residuals of an iterate in original units (scalars) and merit = max residual / tolerance."""
+    """Residuals of an iterate in original units (...) and merit = max residual / tolerance."""
 
     primal: jax.Array
     dual: jax.Array
@@ -274,59 +398,207 @@ class _Figures(NamedTuple):
 
 
 def _residuals(pr: _Scaled, cfg: QPSettings, it: _Iterate) -> tuple[jax.Array, _Figures]:
-    """The scaled dual residual rd = Ps x + qs + Gs'z (n,) and the _Figures of the iterate."""
+    """The scaled dual residual rd = Ps x + qs + Gs'z (n, ...) and the _Figures of the iterate."""
     m = pr.hs.shape[0]
-    px = _mv(pr.Ps, it.x)
-    rd = px + pr.qs + _mtv(pr.Gs, it.z)
-    primal = _inf_norm(jp.maximum(it.gx - pr.hs, 0.0) / pr.e)
-    dual = _inf_norm(rd / pr.d) / pr.c
-    gap = jp.dot(it.s, it.z) / (pr.c * m)
-    primal_tol = cfg.eps_abs + cfg.eps_rel * jp.maximum(_inf_norm(it.gx / pr.e), _inf_norm(pr.h))
+    px = _pin(_mv(pr.Ps, it.x), pr.one)
+    rd = _pin(px + pr.qs + _mtv(pr.Gs, it.z), pr.one)
+    primal = _inf_norm(jp.maximum(it.gx - pr.hs, 0.0) * pr.inv_e)
+    dual = _inf_norm(rd * pr.inv_d) * pr.inv_c
+    gap = _dot(it.s, it.z) * pr.inv_c / m
+    primal_tol = cfg.eps_abs + cfg.eps_rel * jp.maximum(_inf_norm(it.gx * pr.inv_e), pr.norms[0])
     # the scale of G'z is bounded via |G|'|z| (large duals of equality pairs cancel in G'z)
-    dual_scale = jp.maximum(_inf_norm(px / pr.d), pr.g_abs * _inf_norm(it.z)) / pr.c
-    dual_tol = cfg.eps_abs + cfg.eps_rel * jp.maximum(dual_scale, _inf_norm(pr.q))
-    obj_scale = jp.maximum(jp.abs(jp.dot(it.x, px)), jp.abs(jp.dot(it.x, pr.qs))) / (pr.c * m)
+    dual_scale = jp.maximum(_inf_norm(px * pr.inv_d), pr.g_abs * _inf_norm(it.z)) * pr.inv_c
+    dual_tol = cfg.eps_abs + cfg.eps_rel * jp.maximum(dual_scale, pr.norms[1])
+    obj_scale = jp.maximum(jp.abs(_dot(it.x, px)), jp.abs(_dot(it.x, pr.qs))) * pr.inv_c / m
     gap_tol = cfg.eps_abs + cfg.eps_rel * obj_scale
     merit = jp.maximum(jp.maximum(primal / primal_tol, dual / dual_tol), gap / gap_tol)
     merit = jp.where(jp.isfinite(merit), merit, jp.inf)
-    return rd, _Figures(primal, dual, gap, primal_tol, merit)
+    figures = _Figures(primal, dual, gap, primal_tol, merit)
+    return rd, _Figures(*(_pin(f, pr.one) for f in figures))
 
 
-def _newton_step(pr: _Scaled, cfg: QPSettings, normal_matrix, it: _Iterate, rd: jax.Array):
+def _newton_step(pr: _Scaled, cfg: QPSettings, it: _Iterate, rd: jax.Array) -> _Iterate:
     """One Mehrotra predictor-corrector step from `it`; returns the next _Iterate."""
-    Gs, m = pr.Gs, pr.hs.shape[0]
+    Gs, m, one = pr.Gs, pr.hs.shape[0], pr.one
     x, s, z, gx = it
     rp = gx + s - pr.hs  # primal residual of G x + s = h
-    mu = jp.dot(s, z) / m
+    mu = _pin(_dot(s, z) / m, one)
     w = jp.minimum(z / s, _BIG)
-    chol = _cholesky(normal_matrix(w), cfg.pivot_floor)
+    chol = _cholesky(_normal_columns(pr, w), cfg.pivot_floor)
 
     def direction(rc):  # Newton direction of the KKT system with Z ds + S dz = -rc
-        dx = _cho_solve(chol, -rd - _mtv(Gs, w * rp - rc / s))
-        gdx = _mv(Gs, dx)
+        dx = _cho_solve(chol, -rd - _mtv(Gs, _pin(w * rp - rc / s, one)))
+        gdx = _pin(_mv(Gs, dx), one)
         ds = -rp - gdx
         dz = -(rc + z * ds) / s
         return dx, ds, dz, gdx
 
     # predictor (affine scaling), then Mehrotra's centring and second-order correction
     dx, ds, dz, _ = direction(s * z)
-    a_p, a_d = _max_step(s, ds), _max_step(z, dz)
-    mu_aff = jp.dot(s + a_p * ds, z + a_d * dz) / m
+    a_p, a_d = _pin(_max_step(s, ds), one), _pin(_max_step(z, dz), one)
+    mu_aff = _dot(s + a_p * ds, z + a_d * dz) / m
     sigma = jp.clip(mu_aff / jp.maximum(mu, _TINY), 0.0, 1.0) ** 3
-    target = jp.maximum(sigma * mu, cfg.mu_floor)
+    target = _pin(jp.maximum(sigma * mu, cfg.mu_floor), one)
     dx, ds, dz, gdx = direction(s * z + ds * dz - target)
     a = cfg.step_fraction * jp.minimum(_max_step(s, ds), _max_step(z, dz))
     # No step once mu < mu_stop (float32 gains nothing more and H gets too ill-conditioned to
     # factor), nor a non-finite one.
-    finite = jp.isfinite(a) & jp.all(jp.isfinite(dx)) & jp.all(jp.isfinite(ds))
-    finite &= jp.all(jp.isfinite(dz)) & jp.all(jp.isfinite(gdx))
-    a = jp.where(finite & (mu > cfg.mu_stop), a, 0.0)
+    finite = jp.isfinite(a) & _all_finite(dx) & _all_finite(ds) & _all_finite(dz)
+    finite = _pin_flag(finite & _all_finite(gdx), one)
+    a = _pin(jp.where(finite & (mu > cfg.mu_stop), a, 0.0), one)
     return _Iterate(
         x=x + a * jp.where(finite, dx, 0.0),
         s=jp.maximum(s + a * jp.where(finite, ds, 0.0), _TINY),
         z=jp.maximum(z + a * jp.where(finite, dz, 0.0), _TINY),
         gx=gx + a * jp.where(finite, gdx, 0.0),
     )
+
+
+def _kernel(P, q, G, h, warm, cfg: QPSettings) -> QPResult:
+    """The method on arrays with trailing batch axes (...); warm is None or (x, z, valid)."""
+    pr = _prepare(P, q, G, h, cfg)
+    x0, s0, z0 = _start(pr, warm, cfg)
+    it0 = _Iterate(x0, s0, z0, _mv(pr.Gs, x0))
+    _, fig0 = _residuals(pr, cfg, it0)
+    never = jp.asarray(cfg.iterations + 1, jp.int32)
+
+    def keep_best(best, it, fig):
+        better = _pin_flag(fig.merit < best[1].merit, pr.one)
+        return jax.tree.map(lambda a, b: jp.where(better, a, b), (it, fig), best)
+
+    def body(carry, k):  # k = iterations done so far
+        it, best, first = carry
+        rd, fig = _residuals(pr, cfg, it)
+        first = jp.where((fig.merit <= 1.0) & (first > k), k, first)
+        best = keep_best(best, it, fig)
+        return (_newton_step(pr, cfg, it, rd), best, first), None
+
+    carry = (it0, (it0, fig0), jp.full(q.shape[1:], never))
+    ks = jp.arange(cfg.iterations, dtype=jp.int32)
+    it, best, first = jax.lax.scan(body, carry, ks)[0]
+    _, fig = _residuals(pr, cfg, it)
+    first = jp.where((fig.merit <= 1.0) & (first == never), cfg.iterations, first)
+    it, fig = keep_best(best, it, fig)
+    return _result(pr, it, fig, first)
+
+
+def _result(pr: _Scaled, it: _Iterate, fig: _Figures, first: jax.Array) -> QPResult:
+    """Back to the original units, with the flags; x = z = s = 0 where not valid."""
+    x_out, z_out, s_out = pr.d * it.x, pr.e * it.z * pr.inv_c, it.s * pr.inv_e
+    finite = _all_finite(x_out) & _all_finite(z_out) & _all_finite(s_out)
+    valid = _pin_flag(pr.finite & finite & (fig.primal <= fig.primal_tol), pr.one)
+    x_out, z_out, s_out = (_pin(jp.where(valid, v, 0.0), pr.one) for v in (x_out, z_out, s_out))
+    objective = 0.5 * _dot(x_out, _mv(pr.P, x_out)) + _dot(pr.q, x_out)
+    zero = jp.zeros((), x_out.dtype)
+    return QPResult(
+        x=x_out,
+        z=z_out,
+        s=s_out,
+        objective=objective,
+        primal_residual=jp.where(finite, fig.primal, zero),
+        dual_residual=jp.where(finite, fig.dual, zero),
+        gap=jp.where(finite, fig.gap, zero),
+        iterations=first,
+        converged=valid & (fig.merit <= 1.0),
+        valid=valid,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Entry points and batching.
+
+
+def _run_kernel(args: tuple, cfg: QPSettings) -> QPResult:
+    """args = (P, q, G, h) or (P, q, G, h, warm x, warm z, warm valid), trailing batch axes."""
+    warm = tuple(args[4:]) or None
+    return _kernel(*args[:4], warm, cfg)
+
+
+def _solve_many(args: tuple, cfg: QPSettings) -> QPResult:
+    """args with a leading batch axis B: the kernel on chunks of _CHUNK problems, batch minor."""
+    size = args[0].shape[0]
+    chunk = min(_CHUNK, size)
+    n_chunks = -(-size // chunk)
+    pad = n_chunks * chunk - size
+    if pad:  # repeat the last problem to fill the last chunk
+        args = [jp.concatenate([a, jp.repeat(a[-1:], pad, axis=0)]) for a in args]
+
+    def run(chunk_args):  # (chunk, ...) each
+        # transpose once: XLA:CPU would otherwise fuse the transpose into every reader (strided)
+        one = 1.0 + 0.0 * jp.isfinite(chunk_args[1][:, 0]).astype(chunk_args[1].dtype)
+        moved = (jp.moveaxis(a, 0, -1) for a in chunk_args)
+        res = _run_kernel(tuple(a if a.dtype == bool else _pin(a, one) for a in moved), cfg)
+        return jax.tree.map(lambda a: jp.moveaxis(a, -1, 0), res)
+
+    if n_chunks == 1:
+        out = run(args)
+    else:
+        split = [a.reshape((n_chunks, chunk) + a.shape[1:]) for a in args]
+        out = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), jax.lax.map(run, split))
+    return jax.tree.map(lambda a: a[:size], out) if pad else out
+
+
+def _broadcast_unbatched(axis_size: int, in_batched, args) -> list[jax.Array]:
+    return [
+        a if b else jp.broadcast_to(a, (axis_size,) + a.shape) for a, b in zip(args, in_batched)
+    ]
+
+
+@functools.lru_cache(maxsize=None)
+def _batched_solver(cfg: QPSettings):
+    """f(*args with a leading batch axis) -> QPResult with that axis; a vmap of f is merged into
+    the same batch axis (nested vmaps become one batch)."""
+
+    @jax.custom_batching.custom_vmap
+    def many(*args):
+        return _solve_many(args, cfg)
+
+    @many.def_vmap
+    def _many_vmap(axis_size, in_batched, *args):
+        args = _broadcast_unbatched(axis_size, in_batched, args)
+        inner = args[0].shape[1]
+        out = many(*(a.reshape((-1,) + a.shape[2:]) for a in args))
+        out = jax.tree.map(lambda a: a.reshape((axis_size, inner) + a.shape[1:]), out)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return many
+
+
+@functools.lru_cache(maxsize=None)
+def _solver(cfg: QPSettings):
+    """f(*args of one problem) -> QPResult, whose vmap runs the batch-minor chunked kernel."""
+
+    @jax.custom_batching.custom_vmap
+    def one(*args):
+        return _run_kernel(args, cfg)
+
+    @one.def_vmap
+    def _one_vmap(axis_size, in_batched, *args):
+        out = _batched_solver(cfg)(*_broadcast_unbatched(axis_size, in_batched, args))
+        return out, jax.tree.map(lambda _: True, out)
+
+    return one
+
+
+def _arguments(P, q, G, h, warm_start: QPResult | None) -> tuple:
+    """(P, q, G, h[, warm x, z, valid]) as arrays of a float dtype, shapes checked."""
+    dtype = jp.result_type(P, q, G, h, jp.float32)
+    P, q, G, h = (jp.asarray(a, dtype) for a in (P, q, G, h))
+    n, m = q.shape[0] if q.ndim == 1 else -1, h.shape[0] if h.ndim == 1 else -1
+    if q.ndim != 1 or h.ndim != 1 or P.shape != (n, n) or G.shape != (m, n):
+        raise DpcError(
+            f"qp.solve takes one problem: P (n, n), q (n,), G (m, n), h (m,); got P {P.shape}, "
+            f"q {q.shape}, G {G.shape}, h {h.shape}. For a batch, use jax.vmap(qp.solve)."
+        )
+    if warm_start is None:
+        return (P, q, G, h)
+    warm = (jp.asarray(warm_start.x), jp.asarray(warm_start.z), jp.asarray(warm_start.valid))
+    if warm[0].shape != (n,) or warm[1].shape != (m,) or warm[2].shape != ():
+        raise DpcError(
+            f"warm_start must be a QPResult of this problem's shapes (x ({n},), z ({m},), valid "
+            f"()); got x {warm[0].shape}, z {warm[1].shape}, valid {warm[2].shape}."
+        )
+    return (P, q, G, h, *warm)
 
 
 def solve(  # noqa: PLR0913 (the problem's four arrays plus two options)
@@ -346,53 +618,24 @@ def solve(  # noqa: PLR0913 (the problem's four arrays plus two options)
         (ignored where its `valid` is False).
       settings: QPSettings, defaults if None.
     Returns the best iterate seen (smallest residual-to-tolerance ratio). Never raises inside jit:
-    non-finite input gives valid False and x = 0.
+    non-finite input gives valid False and x = 0 (shapes that are not one problem's raise
+    DpcError when traced). Under jax.vmap the batch runs batch-minor (see the module doc); the
+    results are the same as one call per problem up to float32 rounding.
     """
     cfg = settings or QPSettings()
-    pr = _prepare(P, q, G, h, cfg)
-    normal_matrix = _normal_matrix_fn(pr, cfg)
-    x0, s0, z0 = _start(pr, normal_matrix, warm_start, cfg)
-    it0 = _Iterate(x0, s0, z0, _mv(pr.Gs, x0))
-    _, fig0 = _residuals(pr, cfg, it0)
-    never = jp.asarray(cfg.iterations + 1, jp.int32)
-
-    def keep_best(best, it, fig):
-        better = fig.merit < best[1].merit
-        return jax.tree.map(lambda a, b: jp.where(better, a, b), (it, fig), best)
-
-    def body(carry, k):  # k = iterations done so far
-        it, best, first = carry
-        rd, fig = _residuals(pr, cfg, it)
-        first = jp.where((fig.merit <= 1.0) & (first > k), k, first)
-        best = keep_best(best, it, fig)
-        return (_newton_step(pr, cfg, normal_matrix, it, rd), best, first), None
-
-    carry = (it0, (it0, fig0), never)
-    ks = jp.arange(cfg.iterations, dtype=jp.int32)
-    it, best, first = jax.lax.scan(body, carry, ks)[0]
-    _, fig = _residuals(pr, cfg, it)
-    first = jp.where((fig.merit <= 1.0) & (first == never), cfg.iterations, first)
-    it, fig = keep_best(best, it, fig)
-    return _result(pr, it, fig, first)
+    return _solver(cfg)(*_arguments(P, q, G, h, warm_start))
 
 
-def _result(pr: _Scaled, it: _Iterate, fig: _Figures, first: jax.Array) -> QPResult:
-    """Back to the original units, with the flags; x = z = s = 0 where not valid."""
-    x_out, z_out, s_out = pr.d * it.x, pr.e * it.z / pr.c, it.s / pr.e
-    finite = jp.all(jp.isfinite(x_out)) & jp.all(jp.isfinite(z_out)) & jp.all(jp.isfinite(s_out))
-    valid = pr.finite & finite & (fig.primal <= fig.primal_tol)
-    x_out, z_out, s_out = (jp.where(valid, v, 0.0) for v in (x_out, z_out, s_out))
-    objective = 0.5 * jp.dot(x_out, _mv(pr.P, x_out)) + jp.dot(pr.q, x_out)
-    zero = jp.zeros((), x_out.dtype)
-    return QPResult(
-        x=x_out,
-        z=z_out,
-        s=s_out,
-        objective=objective,
-        primal_residual=jp.where(finite, fig.primal, zero),
-        dual_residual=jp.where(finite, fig.dual, zero),
-        gap=jp.where(finite, fig.gap, zero),
-        iterations=first,
-        converged=valid & (fig.merit <= 1.0),
-        valid=valid,
-    )
+def _solve_reference(  # noqa: PLR0913 (as solve)
+    P: jax.Array,
+    q: jax.Array,
+    G: jax.Array,
+    h: jax.Array,
+    *,
+    warm_start: QPResult | None = None,
+    settings: QPSettings | None = None,
+) -> QPResult:
+    """`solve` without the batching rule: under vmap, the batch is the leading axis of every op
+    (the layout before the batch-minor kernel). For benchmarks and tests only."""
+    cfg = settings or QPSettings()
+    return _run_kernel(_arguments(P, q, G, h, warm_start), cfg)
