@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-test
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: install demo test bench mjcf lint clean
+.PHONY: install demo test test-all bench mjcf lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,8 +23,17 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/dpc-mjx demo
 
+# Two workers, one test file each at a time (module fixtures share their compiles); the JAX
+# compilation cache in .cache/jax (tests/conftest.py) serves repeated compiles.
+PYTEST := $(BIN)/python -m pytest -q -n 2 --dist loadfile
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(PYTEST)
+
+# Also the tests marked slow: every task x every arm (tests/test_matrix.py) and the paper's
+# alternate arms stepped in tests/test_tasks.py (about half an hour on 2 cores).
+test-all: $(STAMP)
+	$(PYTEST) -m "slow or not slow"
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_physics.py

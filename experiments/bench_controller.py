@@ -10,7 +10,6 @@ all jit(vmap) with `CHUNK` ticks scanned per call; compile time apart.
 from __future__ import annotations
 
 import argparse
-import time
 
 import jax
 import jax.numpy as jp
@@ -18,6 +17,7 @@ import numpy as np
 
 import dpc_mjx  # noqa: F401
 from dpc_mjx import sim
+from dpc_mjx.bench import time_calls
 from dpc_mjx.control import gait
 from dpc_mjx.control.closed_loop import init_loop, make_chunk
 from dpc_mjx.control.controller import make_controller
@@ -25,17 +25,6 @@ from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 
 CHUNK = 50
-
-
-def _time(fn, arg, calls):
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(arg))
-    compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(calls):
-        out = fn(out)
-    jax.block_until_ready(out)
-    return compile_s, (time.perf_counter() - t0) / calls
 
 
 def bench(variant: str, batch: int, calls: int) -> list[tuple[str, float, float]]:
@@ -46,7 +35,7 @@ def bench(variant: str, batch: int, calls: int) -> list[tuple[str, float, float]
         mx_servo, perturbed_home(servo, batch), np.tile(home_ctrl(servo), (batch, 1))
     )
     physics = sim.make_rollout(mx_servo, CHUNK)
-    c_phys, t_phys = _time(physics, data, calls)
+    c_phys, t_phys, _ = time_calls(physics, data, calls)
 
     mx = sim.put_model(model)
     controller = make_controller(model, gait_=gait.trot())
@@ -68,9 +57,9 @@ def bench(variant: str, batch: int, calls: int) -> list[tuple[str, float, float]
 
         return jax.vmap(one)(cs, ls.data, cmd)
 
-    c_ctrl, t_ctrl = _time(jax.jit(ctrl_only), ls.ctrl, calls)
+    c_ctrl, t_ctrl, _ = time_calls(jax.jit(ctrl_only), ls.ctrl, calls)
     loop = make_chunk(mx, controller, CHUNK, kind="mbc")
-    c_loop, t_loop = _time(lambda s: loop(s, cmd, zeros, zeros), ls, calls)
+    c_loop, t_loop, _ = time_calls(lambda s: loop(s, cmd, zeros, zeros), ls, calls)
     per = batch * CHUNK
     return [
         ("MJX physics step", c_phys, t_phys / per),

@@ -20,6 +20,7 @@ from mujoco import rollout
 
 import dpc_mjx  # noqa: F401  (silences mjx's warp import message)
 from dpc_mjx import sim
+from dpc_mjx.bench import time_calls
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 
@@ -59,15 +60,8 @@ def mjx_rate(model, batch, calls):
     mx = sim.put_model(model)
     data = sim.batched_data(mx, perturbed_home(model, batch), np.tile(home_ctrl(model), (batch, 1)))
     run = sim.make_rollout(mx, CHUNK)
-    t0 = time.perf_counter()
-    data = jax.block_until_ready(run(data))
-    compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(calls):
-        data = run(data)
-    jax.block_until_ready(data)
-    rate = batch * CHUNK * calls / (time.perf_counter() - t0)
-    return rate, compile_s, np.asarray(data.qpos[:, 2])
+    compile_s, per_call, data = time_calls(run, data, calls)
+    return batch * CHUNK / per_call, compile_s, np.asarray(data.qpos[:, 2])
 
 
 def physics_table(variants, batches, calls):

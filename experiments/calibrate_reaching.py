@@ -1,12 +1,11 @@
 """Calibrate the reaching task: MBC (u = 0) vs the oracle (u = measured mount wrench) per arm.
 
-    python experiments/calibrate_reaching.py [--episodes 64] [--steps 500] \
+    python experiments/calibrate_reaching.py [--episodes 64] [--steps 1000] \
         [--arms regular longer heavier double] [--controllers mbc oracle] [--seed 0] \
-        [--set push_force=0,60 payload_mass=0,0.5 ...]
+        [--set push_force=0,60 push_axis_weights=0.3,0.3,1 ...]
 
-Prints a markdown table: fall rate (95% Wilson CI), mean return (95% normal CI), RMS roll and
-pitch and forward-speed RMSE over the steps before a fall. Episodes are fixed-length
-(`--steps` env steps of 20 ms), end at the first fall, and use the same seeds for every cell.
+Prints a markdown table (`dpc_mjx.eval`: fall rate with a 95% Wilson interval, mean return with
+a 95% normal interval, RMS roll and pitch, speed and yaw-rate RMSE over the steps before a fall).
 The disturbance distributions are the reaching task's defaults unless overridden with --set.
 """
 
@@ -15,12 +14,8 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
-import time
 
-import numpy as np
-
-import dpc_mjx
-from dpc_mjx.envs.episodes import mean_ci, run_episodes, wilson_ci
+from dpc_mjx.eval import TABLE_HEADER, evaluate, table_row
 
 
 def _override(text: str) -> tuple[str, object]:
@@ -32,7 +27,7 @@ def _override(text: str) -> tuple[str, object]:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--episodes", type=int, default=64)
-    p.add_argument("--steps", type=int, default=500, help="env steps per episode (20 ms each)")
+    p.add_argument("--steps", type=int, default=1000, help="env steps per episode (20 ms each)")
     p.add_argument("--arms", nargs="+", default=["regular", "longer", "heavier", "double"])
     p.add_argument("--controllers", nargs="+", default=["mbc", "oracle"])
     p.add_argument("--seed", type=int, default=0)
@@ -45,33 +40,16 @@ def main() -> None:
         f"{args.episodes} episodes of {args.steps} steps ({args.steps * 0.02:g} s) per cell, "
         f"seed {args.seed}, overrides {overrides or 'none'}\n"
     )
-    header = (
-        "| arm | controller | fall rate [95% CI] | mean return [95% CI] | roll RMS (rad) "
-        "| pitch RMS (rad) | v_x RMSE (m/s) | NaN resets | wall (s) |"
+    print(TABLE_HEADER, flush=True)
+    evaluate(
+        args.arms,
+        args.controllers,
+        episodes=args.episodes,
+        steps=args.steps,
+        seed=args.seed,
+        overrides=overrides,
+        on_result=lambda cell: print(table_row(cell), flush=True),
     )
-    print(header)
-    print("|" + "---|" * 9)
-    for arm in args.arms:
-        for kind in args.controllers:
-            env = dpc_mjx.make("a1_arm/reaching", arm=arm, controller=kind, **overrides)
-            t0 = time.perf_counter()
-            r = run_episodes(env, args.episodes, args.steps, seed=args.seed)
-            wall = time.perf_counter() - t0
-            n, falls = args.episodes, int(r["fell"].sum())
-            lo, hi = wilson_ci(falls, n)
-            m, mlo, mhi = mean_ci(r["return"])
-            steps = max(float(r["measured"].sum()), 1.0)
-
-            def rms(key, steps=steps, r=r):
-                return float(np.sqrt(r[key].sum() / steps))
-
-            print(
-                f"| {arm} | {kind} | {falls / n:.2f} [{lo:.2f}, {hi:.2f}] "
-                f"| {m:.1f} [{mlo:.1f}, {mhi:.1f}] | {rms('roll_sq'):.3f} "
-                f"| {rms('pitch_sq'):.3f} | {rms('vx_sq_err'):.3f} | {int(r['nan'].sum())} "
-                f"| {wall:.0f} |",
-                flush=True,
-            )
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
-from brax.envs.base import Wrapper
+from helpers import FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
@@ -20,18 +20,6 @@ _OBS_SIZES = {  # arm -> (s_arm, p_arm) sizes: 5 joints (4 hinges + finger) per 
     "regular": (10, 5),
     "double": (20, 10),
 }
-
-
-class _CountTraces(Wrapper):
-    """Counts how often `step` is traced (a Python side effect runs only while tracing)."""
-
-    def __init__(self, env):
-        super().__init__(env)
-        self.traces = 0
-
-    def step(self, state, action):
-        self.traces += 1
-        return self.env.step(state, action)
 
 
 def _keys(seed=0, n=_BATCH):
@@ -50,9 +38,10 @@ def _row(tree, i):
 def regular():
     """The regular arm behind the training wrappers, jitted once; three steps taken."""
     env = dpc_mjx.make(_TASK, arm="regular")
-    counted = _CountTraces(env)
+    counted = CountTraces(env)
     wrapped = wrap_for_training(counted, episode_length=100)
-    reset, step = jax.jit(wrapped.reset), jax.jit(wrapped.step)
+    reset = jax.jit(wrapped.reset, compiler_options=FAST_COMPILE)
+    step = jax.jit(wrapped.step, compiler_options=FAST_COMPILE)
     action = jp.zeros((_BATCH, env.action_size))
     states = [reset(_keys())]
     for _ in range(3):
@@ -64,7 +53,8 @@ def regular():
 def plain(request):
     """Other variants, unwrapped: jit(vmap(reset)) and jit(vmap(step)), two steps."""
     env = dpc_mjx.make(_TASK, arm=request.param)
-    reset, step = jax.jit(jax.vmap(env.reset)), jax.jit(jax.vmap(env.step))
+    reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)
+    step = jax.jit(jax.vmap(env.step), compiler_options=FAST_COMPILE)
     s = reset(_keys(1))
     states = [s]
     for _ in range(2):
@@ -202,19 +192,17 @@ def test_sagittal_pushes_turn_with_the_heading():
     np.testing.assert_allclose(left, [0.0, ahead[0], ahead[2]], atol=1e-5)
 
 
+def test_action_scale_per_axis():
+    config = registry.get_config(_TASK, max_force=(10.0, 20.0, 30.0), max_torque=5.0)
+    assert config.u_scale == (10.0, 20.0, 30.0, 5.0, 5.0, 5.0)
+
+
 def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
-    compiles = []
-
-    def listener(event, duration, **_):
-        if "compile" in event:
-            compiles.append(event)
-
     def no_build(*_):
         pytest.fail("the model was built before the arguments were checked")
 
     monkeypatch.setattr(base, "build", no_build)
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with recorded_compiles() as compiles:
         with pytest.raises(DpcError, match="known tasks.*a1_arm/reaching"):
             dpc_mjx.make("a1_arm/juggling")
         with pytest.raises(DpcError, match="known variants"):
@@ -227,8 +215,10 @@ def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
             dpc_mjx.make(_TASK, push_forces=(0.0, 40.0))
         with pytest.raises(DpcError, match="episode_length"):
             dpc_mjx.make(_TASK, episode_length=0)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
+        with pytest.raises(DpcError, match=r"max_force must be a number or an \(x, y, z\)"):
+            dpc_mjx.make(_TASK, max_force=(10.0, 10.0))
+        with pytest.raises(DpcError, match="max_torque must be > 0"):
+            dpc_mjx.make(_TASK, max_torque=(1.0, -1.0, 1.0))
     assert compiles == []
     monkeypatch.undo()
     with pytest.raises(DpcError, match="multiple of the physics step"):

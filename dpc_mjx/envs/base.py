@@ -3,7 +3,7 @@
 One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller tick -> mjx.step]
 at the physics rate (250 Hz), with u chosen by `config.controller`:
 
-    'policy': u = [max_force a[:3], max_torque a[3:]], a = clip(action, -1, 1)   (DPC)
+    'policy': u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)       (DPC)
     'mbc'   : u = 0, the action is ignored                                       (paper baseline)
     'oracle': u = measured arm-mount wrench (`controller.oracle_u`), action ignored
 
@@ -97,7 +97,7 @@ class DpcEnv(Env):
         self._object_bodies = np.array([o.body for o in self.props.objects], int)
         self._ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
         self._ee_bodies = self.model.site_bodyid[self._ee_sites]
-        self._u_scale = jp.array([config.max_force] * 3 + [config.max_torque] * 3)
+        self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
 
     # task hooks -----------------------------------------------------------------------------
 

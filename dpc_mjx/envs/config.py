@@ -28,10 +28,14 @@ class EnvConfig:
     policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
 
-    # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]], world
-    # frame, about the A1 COM (the controller's convention). The oracle's u is not clipped.
-    max_force: float = 60.0  # N per axis
-    max_torque: float = 20.0  # N·m per axis
+    # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]]
+    # (per axis x, y, z; world frame, about the A1 COM, the controller's convention). A number
+    # applies to all three axes. The defaults bound the oracle's u on the reaching task with
+    # margin (its std there: f 2.6, 2.6, 19 N around a mean f_z of -10 N; tau 3.8, 4.0,
+    # 0.44 N·m), so exploration does not throw the robot around with forces no arm exerts.
+    # The oracle's own u is not clipped.
+    max_force: float | tuple[float, float, float] = (15.0, 15.0, 60.0)  # N
+    max_torque: float | tuple[float, float, float] = (12.0, 12.0, 3.0)  # N·m
 
     # Reward (paper eqs. 2-4, fixed weights in `rewards`) and termination.
     fall_penalty: float = -1000.0  # added on the step that falls (see `reaching.py` for why)
@@ -61,7 +65,7 @@ class EnvConfig:
     # Sudden forces on each end effector: piecewise constant, drawn in the yaw (heading) frame,
     # applied at the `ee` site; magnitude ~ U(push_force) N, direction below, lasting
     # ~ U(push_duration) s, the next one starting ~ U(push_gap) s after the last one ends.
-    push_force: tuple[float, float] = (0.0, 30.0)  # calibrated, see reaching.py
+    push_force: tuple[float, float] = (0.0, 30.0)  # reaching: 60 N vertical, see reaching.py
     push_duration: tuple[float, float] = (0.2, 1.0)
     # Push direction: a (3,) standard normal vector scaled per yaw-frame axis (x, y, z) by these
     # weights, then normalised: (1, 1, 1) is uniform on the sphere, (1, 0, 1) keeps pushes in the
@@ -72,6 +76,11 @@ class EnvConfig:
     # Payload held by each gripper for the whole episode, mass ~ U(payload_mass) kg, modelled as a
     # constant downward force m g at the `ee` site (the model's masses are not changed).
     payload_mass: tuple[float, float] = (0.0, 0.3)
+
+    @property
+    def u_scale(self) -> tuple[float, ...]:
+        """(6,) N, N, N, N·m, N·m, N·m: u = u_scale * a for an action a in [-1, 1]^6."""
+        return _per_axis(self.max_force) + _per_axis(self.max_torque)
 
     def replace(self, **overrides: Any) -> EnvConfig:
         """A validated copy with `overrides`; unknown names raise `DpcError` listing the fields."""
@@ -91,7 +100,9 @@ class EnvConfig:
         """Raise `DpcError` naming the first invalid field and what it must be."""
         _choice("controller", self.controller, CONTROLLERS)
         _choice("gait", self.gait, GAITS)
-        for name in ("policy_dt", "max_force", "max_torque", "explode_speed", "reach_move_time"):
+        for name in ("max_force", "max_torque"):
+            _axes(name, getattr(self, name))
+        for name in ("policy_dt", "explode_speed", "reach_move_time"):
             _positive(name, getattr(self, name))
         if not isinstance(self.episode_length, int) or self.episode_length <= 0:
             raise DpcError(f"episode_length must be a positive int, got {self.episode_length!r}.")
@@ -136,6 +147,19 @@ def _positive(name: str, value: Any) -> None:
     _number(name, value)
     if value <= 0:
         raise DpcError(f"{name} must be > 0, got {value!r}.")
+
+
+def _per_axis(value: float | tuple[float, ...]) -> tuple[float, float, float]:
+    return tuple(float(v) for v in value) if isinstance(value, tuple) else (float(value),) * 3
+
+
+def _axes(name: str, value: Any) -> None:
+    """A positive number, or an (x, y, z) tuple of them."""
+    values = value if isinstance(value, tuple) else (value,)
+    if isinstance(value, tuple) and len(value) != 3:
+        raise DpcError(f"{name} must be a number or an (x, y, z) tuple, got {value!r}.")
+    for v in values:
+        _positive(name, v)
 
 
 def _range(name: str, value: Any, low: float = -math.inf) -> None:

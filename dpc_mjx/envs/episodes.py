@@ -14,6 +14,8 @@ import jax.numpy as jp
 import numpy as np
 from brax.envs.base import Env
 
+from dpc_mjx.progress import bar
+
 Policy = Callable[[jax.Array, jax.Array], jax.Array]  # (obs (B, n), key) -> action (B, 6)
 
 
@@ -30,13 +32,16 @@ def run_episodes(
     seed: int = 0,
     policy: Policy = zero_policy,
     chunk: int = 50,
+    progress: bool = False,
+    desc: str = "episodes",
 ) -> dict[str, np.ndarray]:
     """Run `episodes` envs (one batch) for `steps` env steps; per-episode arrays (episodes,):
 
     'return', 'fell' (bool), 'nan' (bool), 'length' (steps until done, inclusive), and the sums
     of the env's squared-error metrics over the 'measured' steps (those before done: 'roll_sq',
     'pitch_sq', 'vx_sq_err', 'vy_sq_err', 'yaw_rate_sq_err'), for RMS values. Steps are run in
-    jitted chunks of the largest divisor of `steps` not above `chunk`.
+    jitted chunks of the largest divisor of `steps` not above `chunk`; `progress` shows a bar
+    over the env steps (all episodes together).
     """
     chunk = max(c for c in range(1, min(chunk, steps) + 1) if steps % c == 0)
     sums = ("roll_sq", "pitch_sq", "vx_sq_err", "vy_sq_err", "yaw_rate_sq_err")
@@ -69,9 +74,12 @@ def run_episodes(
     zeros = jp.zeros(episodes)
     acc = {k: zeros for k in ("return", "length", "fell", "nan", "ended", "measured", *sums)}
     carry = (state, acc)
-    for _ in range(steps // chunk):
-        key, k = jax.random.split(key)
-        carry = run_chunk(carry, k)
+    with bar(episodes * steps, desc, "step", progress) as pbar:
+        for _ in range(steps // chunk):
+            key, k = jax.random.split(key)
+            carry = run_chunk(carry, k)
+            jax.block_until_ready(carry)
+            pbar.update(episodes * chunk)
     acc = jax.device_get(carry[1])
     out = {k: np.asarray(v) for k, v in acc.items() if k != "ended"}
     out["fell"] = out["fell"] > 0

@@ -1,0 +1,77 @@
+"""Throughput of the full DPC env vs MJX physics alone, at the same batch (`dpc-mjx bench`,
+`experiments/bench_env.py`).
+
+Per batch: the env (jit(vmap(step)): 5 x [controller tick + mjx.step], disturbances, obs, reward,
+NaN guard; zero actions with the 'policy' controller) and MJX physics alone (`sim.make_rollout`
+with 5 steps per call, robot standing on leg servos), both counted in env steps of 20 ms (5
+physics steps), one call per env step, after a first call that compiles (timed apart).
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import jax.numpy as jp
+import numpy as np
+
+from dpc_mjx import sim
+from dpc_mjx.envs.registry import make
+from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
+
+HEADER = (
+    "| batch | env steps/s (full env) | env steps/s (physics only) | env / physics "
+    "| compile env (s) | compile physics (s) |\n|---|---|---|---|---|---|"
+)
+
+
+def time_calls(fn, x, calls: int):
+    """Time `x = fn(x)`: (compile + first call s, s per later call of `calls`, the last x)."""
+    t0 = time.perf_counter()
+    x = jax.block_until_ready(fn(x))
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in range(calls):
+        x = fn(x)
+    jax.block_until_ready(x)
+    return first, (time.perf_counter() - t0) / calls, x
+
+
+def bench_env(arm: str, batch: int, calls: int, task: str = "a1_arm/reaching") -> dict:
+    """{'env_sps', 'phys_sps' (env steps/s), 'env_compile', 'phys_compile' (s)} at `batch`."""
+    env = make(task, arm=arm)
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), batch))
+    action = jp.zeros((batch, env.action_size))
+    step = jax.jit(jax.vmap(env.step))
+    c_env, t_env, _ = time_calls(lambda s: step(s, action), state, calls)
+
+    servo = with_leg_servos(env.model)
+    mx = sim.put_model(servo)
+    data = sim.batched_data(mx, perturbed_home(servo, batch), np.tile(home_ctrl(servo), (batch, 1)))
+    physics = sim.make_rollout(mx, n_steps=env.n_substeps)
+    c_phys, t_phys, _ = time_calls(physics, data, calls)
+    return {
+        "env_sps": batch / t_env,
+        "phys_sps": batch / t_phys,
+        "env_compile": c_env,
+        "phys_compile": c_phys,
+    }
+
+
+def print_table(arm: str, batches, calls: int) -> list[dict]:
+    """Benchmark `arm` at each batch size, printing the markdown table row by row."""
+    print(f"arm {arm}, {calls} calls per row, device {jax.devices()[0].platform}\n")
+    print(HEADER, flush=True)
+    rows = []
+    for batch in batches:
+        rows.append(bench_env(arm, batch, calls))
+        print(table_row(batch, rows[-1]), flush=True)
+    return rows
+
+
+def table_row(batch: int, r: dict) -> str:
+    return (
+        f"| {batch} | {r['env_sps']:,.0f} | {r['phys_sps']:,.0f} "
+        f"| {r['env_sps'] / r['phys_sps']:.2f} | {r['env_compile']:.1f} "
+        f"| {r['phys_compile']:.1f} |"
+    )

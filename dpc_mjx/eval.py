@@ -1,0 +1,148 @@
+"""Evaluation protocol: MBC, DPC and the oracle on the same episodes, with confidence intervals.
+
+Protocol (docs/results.md states it with every table): for each (arm, controller) cell, `episodes`
+envs of the task are reset from the same seeds (`seed`; so every controller meets the same
+initial poses and the same disturbance schedules for as long as the episodes stay alike) and run
+for `steps` env steps of 20 ms without auto-reset; an episode ends at its first fall (or NaN
+reset) and its return is the sum of the paper's rewards (eq. 4) up to and including that step,
+the fall penalty included. Reported per cell: fall rate with a 95% Wilson interval, mean return
+with a 95% normal interval, RMS roll and pitch (rad), RMSE of forward and lateral speed (m/s) and
+of the yaw rate (rad/s) over the steps before a fall, NaN resets, wall time.
+
+Controllers: 'mbc' (u = 0), 'oracle' (u = the measured arm-mount wrench) and 'dpc' (u from the
+trained policy acting on `[s_body, z]`, z from the arm's own encoder).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from dpc_mjx.envs.episodes import Policy, mean_ci, run_episodes, wilson_ci
+from dpc_mjx.envs.registry import make
+from dpc_mjx.errors import DpcError
+
+CONTROLLERS = ("mbc", "dpc", "oracle")
+
+
+@dataclasses.dataclass(frozen=True)
+class CellResult:
+    """One (arm, controller) cell of the protocol."""
+
+    arm: str
+    controller: str
+    episodes: int
+    steps: int
+    falls: int
+    fall_ci: tuple[float, float]  # 95% Wilson interval of the fall rate
+    mean_return: float
+    return_ci: tuple[float, float]  # 95% normal interval of the mean return
+    roll_rms: float  # rad, over the steps before a fall
+    pitch_rms: float  # rad
+    vx_rmse: float  # m/s, yaw frame, vs the command
+    vy_rmse: float  # m/s
+    yaw_rate_rmse: float  # rad/s
+    nan_resets: int
+    seconds: float  # wall time, compile included
+
+    @property
+    def fall_rate(self) -> float:
+        return self.falls / self.episodes
+
+
+def evaluate_env(
+    env,
+    arm: str,
+    controller: str,
+    episodes: int,
+    steps: int,
+    seed: int,
+    policy: Policy | None,
+    progress: bool = True,
+) -> CellResult:
+    """Run one cell on a built env (its config fixes the controller; `policy` for 'dpc')."""
+    t0 = time.perf_counter()
+    kw = {} if policy is None else {"policy": policy}
+    desc = f"{arm} {controller}"
+    r = run_episodes(env, episodes, steps, seed=seed, progress=progress, desc=desc, **kw)
+    seconds = time.perf_counter() - t0
+    falls = int(r["fell"].sum())
+    mean, lo, hi = mean_ci(r["return"])
+    measured = max(float(r["measured"].sum()), 1.0)
+
+    def rms(key: str) -> float:
+        return float(np.sqrt(r[key].sum() / measured))
+
+    return CellResult(
+        arm=arm,
+        controller=controller,
+        episodes=episodes,
+        steps=steps,
+        falls=falls,
+        fall_ci=wilson_ci(falls, episodes),
+        mean_return=mean,
+        return_ci=(lo, hi),
+        roll_rms=rms("roll_sq"),
+        pitch_rms=rms("pitch_sq"),
+        vx_rmse=rms("vx_sq_err"),
+        vy_rmse=rms("vy_sq_err"),
+        yaw_rate_rmse=rms("yaw_rate_sq_err"),
+        nan_resets=int(r["nan"].sum()),
+        seconds=seconds,
+    )
+
+
+def evaluate(
+    arms: list[str],
+    controllers: list[str],
+    *,
+    task: str = "a1_arm/reaching",
+    episodes: int = 64,
+    steps: int = 1000,
+    seed: int = 0,
+    dpc_policy_for: Callable[[str], Policy] | None = None,
+    overrides: dict | None = None,
+    on_result: Callable[[CellResult], None] | None = None,
+    progress: bool = True,
+) -> list[CellResult]:
+    """Every (arm, controller) cell of the protocol on `task`; `dpc_policy_for(arm)` gives the
+    DPC policy of an arm (its encoder + the shared actor), needed when 'dpc' is asked for."""
+    unknown = sorted(set(controllers) - set(CONTROLLERS))
+    if unknown:
+        raise DpcError(f"Unknown controller(s) {unknown}; choose from {list(CONTROLLERS)}.")
+    if "dpc" in controllers and dpc_policy_for is None:
+        raise DpcError("Evaluating 'dpc' needs a trained policy: pass dpc_policy_for (or --run).")
+    if episodes < 1 or steps < 1:
+        raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
+    results = []
+    for arm in arms:
+        policy_for_arm = dpc_policy_for(arm) if "dpc" in controllers else None
+        for controller in controllers:
+            env_controller = "policy" if controller == "dpc" else controller
+            env = make(task, arm=arm, controller=env_controller, **(overrides or {}))
+            policy = policy_for_arm if controller == "dpc" else None
+            cell = evaluate_env(env, arm, controller, episodes, steps, seed, policy, progress)
+            results.append(cell)
+            if on_result is not None:
+                on_result(cell)
+    return results
+
+
+TABLE_HEADER = (
+    "| arm | controller | fall rate [95% CI] | mean return [95% CI] | roll RMS (rad) "
+    "| pitch RMS (rad) | v_x RMSE (m/s) | yaw-rate RMSE (rad/s) | NaN resets | wall (s) |\n"
+    "|---|---|---|---|---|---|---|---|---|---|"
+)
+
+
+def table_row(c: CellResult) -> str:
+    """A markdown row under `TABLE_HEADER`."""
+    return (
+        f"| {c.arm} | {c.controller} | {c.fall_rate:.2f} [{c.fall_ci[0]:.2f}, {c.fall_ci[1]:.2f}]"
+        f" | {c.mean_return:.1f} [{c.return_ci[0]:.1f}, {c.return_ci[1]:.1f}]"
+        f" | {c.roll_rms:.3f} | {c.pitch_rms:.3f} | {c.vx_rmse:.3f} | {c.yaw_rate_rmse:.3f}"
+        f" | {c.nan_resets} | {c.seconds:.0f} |"
+    )
