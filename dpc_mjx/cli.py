@@ -1,18 +1,118 @@
-"""The `dpc-mjx` command line."""
+"""The `dpc-mjx` command line: one entry point, a subcommand per stage.
+
+    dpc-mjx demo                       a small adapter + short SAC run, then MBC vs DPC (minutes)
+    dpc-mjx train --run runs/x         data -> adapter -> SAC -> export -> evaluation
+    dpc-mjx train-adapter --run runs/x only the adapter stage (continue with train --resume)
+    dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
+    dpc-mjx eval --export DIR          MBC / DPC / oracle on the protocol of docs/results.md
+    dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
+    dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
+    dpc-mjx variants                   every arm variant built and stood in MJX
+    dpc-mjx mjcf                       write every variant's MJCF into mjcf/
+
+Hyperparameters are not flags: `--set name=value ...` overrides any `RunConfig` field by dotted
+name (`arm=longer`, `sac.num_envs=32`, `adapter.epochs=40`, `env.push_force=[0,60]`); values are
+read as JSON where they parse as JSON, else as strings.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import pathlib
 import sys
 
 from dpc_mjx.errors import DpcError
 
 
+def _parse_sets(items: list[str]) -> dict:
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise DpcError(f"--set takes name=value, got {item!r} (e.g. sac.num_envs=32).")
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            value = text
+        out[name] = tuple(value) if isinstance(value, list) else value
+    return out
+
+
+def _run_config(args: argparse.Namespace):
+    from dpc_mjx.pipeline import RunConfig
+
+    named = {k: getattr(args, k) for k in ("arm", "samples", "task") if getattr(args, k, None)}
+    if getattr(args, "timesteps", None):
+        named["sac.num_timesteps"] = args.timesteps
+    if getattr(args, "episodes", None):
+        named["eval_episodes"] = args.episodes
+    return RunConfig().replace(**named, **_parse_sets(args.set))
+
+
+def _train(args: argparse.Namespace) -> None:
+    from dpc_mjx.pipeline import read_run_config, train_and_evaluate
+
+    run = pathlib.Path(args.run)
+    config = read_run_config(run) if args.resume and not args.set else _run_config(args)
+    train_and_evaluate(config, run, resume=args.resume)
+    print(f"run folder: {run} (eval.md, summary.json, plots/, export/)")
+
+
+def _train_adapter(args: argparse.Namespace) -> None:
+    from dpc_mjx.pipeline import start_run, train_adapter
+
+    run = pathlib.Path(args.run)
+    config = _run_config(args)
+    start_run(config, run, resume=False)
+    train_adapter(config, run)
+    print(f"adapter saved in {run / 'adapter'}; continue with: dpc-mjx train --run {run} --resume")
+
+
+def _transfer(args: argparse.Namespace) -> None:
+    from dpc_mjx.pipeline import transfer_arm
+
+    transfer_arm(args.export, args.arm, samples=args.samples, task=args.task, seed=args.seed)
+
+
+def _eval(args: argparse.Namespace) -> None:
+    from dpc_mjx.pipeline import SHIPPED, evaluate_export
+
+    evaluate_export(
+        args.export or SHIPPED,
+        arms=args.arms,
+        controllers=args.controllers,
+        task=args.task,
+        episodes=args.episodes,
+        steps=args.steps,
+        seed=args.seed,
+        out=args.out,
+    )
+
+
+def _export(args: argparse.Namespace) -> None:
+    from dpc_mjx.pipeline import export_run
+
+    print(f"exported to {export_run(args.run, args.out)}")
+
+
+def _bench(args: argparse.Namespace) -> None:
+    from dpc_mjx.bench import print_table
+
+    print_table(args.arm, args.batches, args.calls)
+
+
 def _demo(args: argparse.Namespace) -> None:
     from dpc_mjx.demo import run_demo
+
+    run_demo(quick=args.quick)
+
+
+def _variants(args: argparse.Namespace) -> None:
+    from dpc_mjx.demo import run_variants
     from dpc_mjx.robots import VARIANTS
 
-    run_demo(args.variants or tuple(VARIANTS), batch=args.batch, seconds=args.seconds)
+    run_variants(args.variants or tuple(VARIANTS), batch=args.batch, seconds=args.seconds)
 
 
 def _mjcf(args: argparse.Namespace) -> None:
@@ -22,26 +122,89 @@ def _mjcf(args: argparse.Namespace) -> None:
         print(path)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="dpc-mjx", description=__doc__)
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="dpc-mjx", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    demo = sub.add_parser("demo", help="build every arm variant and stand a batch of each in MJX")
-    demo.add_argument("--variants", nargs="*", help="variant names (default: all)")
-    demo.add_argument("--batch", type=int, default=16, help="envs per variant (default 16)")
-    demo.add_argument("--seconds", type=float, default=1.0, help="simulated time (default 1)")
-    demo.set_defaults(run=_demo)
+    def run_options(p, resume: bool):
+        p.add_argument("--run", required=True, help="run folder (created)")
+        p.add_argument("--arm", help="arm variant (default regular)")
+        p.add_argument("--task", help="task (default a1_arm/reaching)")
+        p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
+        p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
+        if resume:
+            p.add_argument("--timesteps", type=int, help="SAC env steps (default 1000000)")
+            p.add_argument("--episodes", type=int, help="evaluation episodes (default 64)")
+            p.add_argument("--resume", action="store_true", help="continue a killed run")
 
-    mjcf = sub.add_parser("mjcf", help="write every variant's robot and scene MJCF")
-    mjcf.add_argument("out_dir", nargs="?", default="mjcf")
-    mjcf.set_defaults(run=_mjcf)
+    p = sub.add_parser("demo", help="small adapter + short SAC, then MBC vs DPC (minutes)")
+    p.add_argument("--quick", action="store_true", help="an even smaller budget (smoke run)")
+    p.set_defaults(handler=_demo)
 
-    args = parser.parse_args(argv)
+    p = sub.add_parser("train", help="the whole pipeline into a run folder")
+    run_options(p, resume=True)
+    p.set_defaults(handler=_train)
+
+    p = sub.add_parser("train-adapter", help="only collect data and train the adapter")
+    run_options(p, resume=False)
+    p.set_defaults(handler=_train_adapter)
+
+    p = sub.add_parser("transfer", help="train a new arm's encoder against a frozen decoder")
+    p.add_argument("--export", required=True, help="an export folder (run/export)")
+    p.add_argument("--arm", required=True, help="the new arm variant, e.g. so100")
+    p.add_argument("--samples", type=int, default=30_000)
+    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(handler=_transfer)
+
+    p = sub.add_parser("eval", help="MBC / DPC / oracle with confidence intervals")
+    p.add_argument(
+        "--export", help="an export folder (default: the shipped dpc_mjx/artefacts/regular)"
+    )
+    p.add_argument("--arms", nargs="+", help="arms (default: every arm with an encoder)")
+    p.add_argument("--controllers", nargs="+", default=["mbc", "dpc", "oracle"])
+    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--episodes", type=int, default=64)
+    p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
+    p.add_argument("--seed", type=int, default=1000)
+    p.add_argument("--out", help="also write the table to this markdown file")
+    p.set_defaults(handler=_eval)
+
+    p = sub.add_parser("export", help="export a run's adapter and policy")
+    p.add_argument("--run", required=True)
+    p.add_argument("--out", help="export folder (default: run/export)")
+    p.set_defaults(handler=_export)
+
+    p = sub.add_parser("bench", help="env steps/s, full env vs physics only")
+    p.add_argument("--arm", default="regular")
+    p.add_argument("--batches", type=int, nargs="+", default=[1, 64, 256])
+    p.add_argument("--calls", type=int, default=20)
+    p.set_defaults(handler=_bench)
+
+    p = sub.add_parser("variants", help="build every arm variant and stand a batch of each")
+    p.add_argument("--variants", nargs="*", help="variant names (default: all)")
+    p.add_argument("--batch", type=int, default=16, help="envs per variant (default 16)")
+    p.add_argument("--seconds", type=float, default=1.0, help="simulated time (default 1)")
+    p.set_defaults(handler=_variants)
+
+    p = sub.add_parser("mjcf", help="write every variant's robot and scene MJCF")
+    p.add_argument("out_dir", nargs="?", default="mjcf")
+    p.set_defaults(handler=_mjcf)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     try:
-        args.run(args)
+        args.handler(args)
     except DpcError as e:
         print(f"dpc-mjx: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("dpc-mjx: interrupted (a run folder can be continued with --resume)", file=sys.stderr)
+        return 130
     return 0
 
 

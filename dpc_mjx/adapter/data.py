@@ -1,0 +1,164 @@
+"""Random-motion data for the latent dynamic adapter (paper §III-B, "random movement of both the
+robot and the arm"): samples (s_body_t, s_arm_t, p_arm_t) -> s_drp_{t+1}.
+
+The data come from a DPC env (normally the reaching task) batched with `wrap_for_training`: the
+body follows random velocity commands, the arm random reaching targets, under random end-effector
+pushes and payloads (the env's `EnvConfig` distributions), with the env's low-level controller.
+For the adapter the env should be built with `controller="mbc"` (u = 0), so the data show the
+arm's effect on the body the policy will later correct; `collect` warns of nothing and takes any
+env whose observation is `[s_body, s_arm, p_arm]`.
+
+s_drp = (roll rate, pitch rate): the trunk's angular velocity about its own x and y axes (rad/s,
+trunk frame, what an IMU's gyro reads), i.e. s_body[2:4] one env step (20 ms) later.
+
+A transition whose next state is the first of a new episode (fall, NaN reset or episode end) is
+dropped: its "next" state is not a successor. `collect` runs batched steps until exactly
+`samples` transitions are kept and reports how many env steps that took.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import time
+
+import jax
+import jax.numpy as jp
+import numpy as np
+
+from dpc_mjx.envs.base import DpcEnv
+from dpc_mjx.envs.observations import PRIVILEGED
+from dpc_mjx.envs.wrappers import wrap_for_training
+from dpc_mjx.errors import DpcError
+from dpc_mjx.progress import bar
+
+DRP = slice(2, 4)  # roll and pitch rate (rad/s, trunk frame) inside s_body
+
+
+@dataclasses.dataclass(frozen=True)
+class Dataset:
+    """N transitions; arrays are float32 numpy, rows in collection order (time, then env)."""
+
+    s_body: np.ndarray  # (N, 11) see `observations.s_body`
+    s_arm: np.ndarray  # (N, 2 n) arm joint positions, velocities
+    p_arm: np.ndarray  # (N, n_act) arm servo targets
+    s_drp_next: np.ndarray  # (N, 2) rad/s, roll and pitch rate one env step later
+    env_id: np.ndarray | None = None  # (N,) which of the batched envs a row came from
+    # (N, 6) privileged, never an input of the adapter or the policy: the oracle's u at t, the
+    # measured mount wrench [f_a (N), tau_a (N·m)] about the A1 COM (`controller.oracle_u`)
+    u_oracle: np.ndarray | None = None
+    env_steps: int = 0  # env steps run to collect them (kept + dropped)
+    seconds: float = 0.0  # wall time of the collection
+
+    def __post_init__(self):
+        n = len(self.s_body)
+        for name in ("s_arm", "p_arm", "s_drp_next", "env_id", "u_oracle"):
+            if getattr(self, name) is not None and len(getattr(self, name)) != n:
+                raise DpcError(f"Dataset.{name} has {len(getattr(self, name))} rows, s_body {n}.")
+
+    def __len__(self) -> int:
+        return len(self.s_body)
+
+    @property
+    def encoder_input(self) -> np.ndarray:
+        """(N, n_in) the encoder's raw input [s_body, s_arm, p_arm] (an env observation)."""
+        return np.concatenate([self.s_body, self.s_arm, self.p_arm], axis=1)
+
+    def take(self, rows: slice | np.ndarray) -> Dataset:
+        return dataclasses.replace(
+            self,
+            s_body=self.s_body[rows],
+            s_arm=self.s_arm[rows],
+            p_arm=self.p_arm[rows],
+            s_drp_next=self.s_drp_next[rows],
+            env_id=None if self.env_id is None else self.env_id[rows],
+            u_oracle=None if self.u_oracle is None else self.u_oracle[rows],
+        )
+
+    def save(self, path: str | pathlib.Path) -> None:
+        """As a numpy .npz (arrays only; read back with `Dataset.load`, never pickle)."""
+        arrays = {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if isinstance(getattr(self, f.name), np.ndarray)
+        }
+        counters = np.array([self.env_steps, self.seconds], np.float64)
+        path = pathlib.Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, counters=counters, **arrays)
+
+    @classmethod
+    def load(cls, path: str | pathlib.Path) -> Dataset:
+        """A dataset written by `save`; `DpcError` if missing or not one."""
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                arrays = {k: f[k] for k in f.files}
+        except (OSError, ValueError) as e:
+            raise DpcError(f"Cannot read the dataset {path} ({e}); collect it again.") from e
+        names = {f.name for f in dataclasses.fields(cls)}
+        if not {"s_body", "s_arm", "p_arm", "s_drp_next", "counters"} <= set(arrays):
+            raise DpcError(f"{path} is not a dataset written by Dataset.save; collect it again.")
+        env_steps, seconds = arrays.pop("counters")
+        fields = {k: v for k, v in arrays.items() if k in names}
+        return cls(**fields, env_steps=int(env_steps), seconds=float(seconds))
+
+    def split(self, val_fraction: float) -> tuple[Dataset, Dataset]:
+        """(train, validation): the last `val_fraction` of the rows are held out (later in time,
+        so validation episodes are mostly not seen in training)."""
+        n_val = max(1, round(len(self) * val_fraction))
+        if n_val >= len(self):
+            raise DpcError(f"{len(self)} samples are too few to hold out {val_fraction:.0%}.")
+        return self.take(slice(0, len(self) - n_val)), self.take(slice(len(self) - n_val, None))
+
+
+def collect(
+    env: DpcEnv,
+    samples: int,
+    n_envs: int = 64,
+    seed: int = 0,
+    chunk: int = 50,
+    progress: bool = True,
+) -> Dataset:
+    """Exactly `samples` random-motion transitions from `n_envs` envs stepped in jitted chunks of
+    `chunk` env steps (actions 0: u = 0 for a 'policy' env, ignored by 'mbc')."""
+    if not isinstance(samples, int) or samples < 1:
+        raise DpcError(f"samples must be a positive int, got {samples!r}.")
+    if not isinstance(n_envs, int) or n_envs < 1:
+        raise DpcError(f"n_envs must be a positive int, got {n_envs!r}.")
+    layout = env.unwrapped.obs_layout
+    batched = wrap_for_training(env)
+    action = jp.zeros((n_envs, env.action_size))
+
+    def one(state, _):
+        obs, u_oracle = state.obs, state.info["privileged"][:, PRIVILEGED["u_oracle"]]
+        state = batched.step(state, action)
+        keep = state.done == 0.0  # the next obs is a successor of obs
+        return state, (obs, u_oracle, state.obs[:, layout.s_body][:, DRP], keep)
+
+    run = jax.jit(lambda s: jax.lax.scan(one, s, None, length=chunk))
+    t0 = time.perf_counter()
+    state = jax.jit(batched.reset)(jax.random.split(jax.random.PRNGKey(seed), n_envs))
+    ids = np.tile(np.arange(n_envs, dtype=np.int32), chunk)  # row order: (time, env)
+    parts, kept, steps = [], 0, 0
+    with bar(samples, "collect", "sample", progress) as pbar:
+        while kept < samples:
+            state, out = run(state)
+            obs, u, drp, keep = (np.asarray(x).reshape(-1, *x.shape[2:]) for x in out)
+            parts.append((obs[keep], drp[keep], ids[keep], u[keep]))
+            kept += int(keep.sum())
+            steps += obs.shape[0]
+            pbar.update(min(int(keep.sum()), samples - pbar.n))
+    obs = np.concatenate([p[0] for p in parts])[:samples].astype(np.float32)
+    drp = np.concatenate([p[1] for p in parts])[:samples].astype(np.float32)
+    env_id = np.concatenate([p[2] for p in parts])[:samples]
+    u_oracle = np.concatenate([p[3] for p in parts])[:samples].astype(np.float32)
+    return Dataset(
+        s_body=obs[:, layout.s_body],
+        s_arm=obs[:, layout.s_arm],
+        p_arm=obs[:, layout.p_arm],
+        s_drp_next=drp,
+        env_id=env_id,
+        u_oracle=u_oracle,
+        env_steps=steps,
+        seconds=time.perf_counter() - t0,
+    )

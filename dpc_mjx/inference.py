@@ -1,0 +1,221 @@
+"""Run an exported DPC policy with numpy only, e.g. on the robot's own computer.
+
+This file imports nothing but the Python standard library, numpy and msgpack (no jax, no flax, no
+other dpc_mjx module), so it can be copied alone next to an export folder written by
+`dpc_mjx.io.export`:
+
+    policy = NumpyPolicy("export/", arm="regular")
+    u = policy.u(obs)   # obs = [s_body (11), s_arm (2 n), p_arm (n_act)], the raw env observation
+
+    z = tanh(E((obs - mean_E) / std_E))                                  latent (latent_size,)
+    a = tanh(pi(([s_body, z] - mean_pi) / std_pi)[:action_size])         action in [-1, 1]^6
+    u = u_scale * a: [f_a (N), tau_a (N m)], per component                world frame, about the COM
+
+E and pi are ReLU MLPs (Dense layers `hidden_0 .. hidden_k`, then `out` for E; the last
+`hidden_k` is pi's output). The msgpack files use flax's format: a dict tree whose arrays are
+msgpack ExtType 1 with payload msgpack((shape, dtype name, raw C-order bytes)), decoded here.
+Computation is in float64. Any problem with the files or the input raises `ValueError`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pathlib
+
+import msgpack
+import numpy as np
+
+FORMAT_VERSION = 1  # the export format read here; equal to dpc_mjx.io.FORMAT_VERSION
+SIDECAR = "dpc.json"
+S_BODY_SIZE = 11  # roll, pitch, wx, wy, wz, vx, vy, vz, cmd_vx, cmd_vy, cmd_yaw
+_NDARRAY_EXT = 1  # flax's msgpack ExtType code of an ndarray
+
+
+def _ext_hook(code: int, data: bytes) -> np.ndarray:
+    if code != _NDARRAY_EXT:
+        raise ValueError(f"unsupported msgpack extension type {code}")
+    shape, dtype, buffer = msgpack.unpackb(data, raw=False)
+    return np.frombuffer(buffer, dtype=np.dtype(dtype)).reshape(shape)
+
+
+def read_tree(path: str | pathlib.Path, sha256: str | None = None) -> dict:
+    """The dict of numpy arrays in a flax msgpack file; `ValueError` if missing or corrupt, or if
+    its sha256 differs from `sha256`."""
+    path = pathlib.Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise ValueError(f"Cannot read {path} ({e}); copy the whole export folder.") from e
+    if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
+        raise ValueError(
+            f"{path} is not the file recorded in {SIDECAR} (sha256 differs): it is truncated, "
+            "corrupt or from another export; copy the export folder again."
+        )
+    try:
+        tree = msgpack.unpackb(data, ext_hook=_ext_hook, raw=False)
+    except Exception as e:  # msgpack raises several types for corrupt input
+        raise ValueError(f"{path} is truncated or corrupt ({e}); copy the export again.") from e
+    if not isinstance(tree, dict):
+        raise ValueError(f"{path} does not hold a dict of arrays; copy the export again.")
+    return tree
+
+
+def _get(tree: dict, keys: tuple[str, ...], path: pathlib.Path) -> np.ndarray | dict:
+    node = tree
+    for k in keys:
+        if not isinstance(node, dict) or k not in node:
+            raise ValueError(f"{path} lacks {'.'.join(keys)}; re-export with dpc_mjx.io.export.")
+        node = node[k]
+    return node
+
+
+def _mlp(layers: dict, names: list[str], path: pathlib.Path) -> list[tuple[np.ndarray, ...]]:
+    """[(kernel (n_in, n_out), bias (n_out,))] in float64, in the order `names`."""
+    out = []
+    for name in names:
+        k, b = (np.asarray(_get(layers, (name, p), path), np.float64) for p in ("kernel", "bias"))
+        if k.ndim != 2 or b.shape != (k.shape[1],) or (out and out[-1][0].shape[1] != k.shape[0]):
+            raise ValueError(
+                f"{path}: layer {name} has kernel {k.shape}, bias {b.shape}, which "
+                "do not chain; re-export with dpc_mjx.io.export."
+            )
+        out.append((k, b))
+    return out
+
+
+def _forward(layers: list[tuple[np.ndarray, ...]], x: np.ndarray) -> np.ndarray:
+    for i, (k, b) in enumerate(layers):
+        x = x @ k + b
+        if i < len(layers) - 1:
+            x = np.maximum(x, 0.0)
+    return x
+
+
+def _norm(tree: dict, key: str, n: int, path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
+    mean, std = (np.asarray(_get(tree, (key, s), path), np.float64) for s in ("mean", "std"))
+    if mean.shape != (n,) or std.shape != (n,):
+        raise ValueError(
+            f"{path}: {key} has shape {mean.shape}/{std.shape}, {SIDECAR} says ({n},);"
+            " re-export with dpc_mjx.io.export."
+        )
+    return mean, std
+
+
+def _file(directory: pathlib.Path, name: str) -> pathlib.Path:
+    if not isinstance(name, str) or pathlib.PurePath(name).name != name or name in ("", ".", ".."):
+        raise ValueError(f"file {name!r} is not a file name in the export folder")
+    return directory / name
+
+
+class NumpyPolicy:
+    """The exported encoder of `arm` and the policy, as numpy arrays (see the module docstring).
+
+    Each method takes one observation (input_size,) or a batch (B, input_size) and returns (k,)
+    or (B, k). Attributes: `meta` (the sidecar), `arm`, `input_size`, `latent_size`,
+    `action_size`, `scale` (6,) (u = scale * a; N for f_a, N·m for tau_a).
+    """
+
+    def __init__(self, directory: str | pathlib.Path, arm: str) -> None:
+        d = pathlib.Path(directory)
+        try:
+            meta = json.loads((d / SIDECAR).read_text())
+            version = meta["format_version"]
+            latent = int(meta["adapter_config"]["latent_size"])
+            n_hidden = len(meta["adapter_config"]["hidden"])
+            pol, scaling, encoders = meta["policy"], meta["action_scaling"], meta["encoders"]
+            hidden, action_size = [int(h) for h in pol["hidden"]], int(pol["action_size"])
+            u_scale = [float(v) for v in scaling["u_scale"]]  # (6,) N, N·m per unit action
+            enc = encoders.get(arm)
+            if enc is not None:
+                input_size = int(enc["input_size"])  # [s_body, s_arm, p_arm] of this arm
+                enc_path, pol_path = _file(d, enc["file"]), _file(d, pol["file"])
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+            raise ValueError(
+                f"{d / SIDECAR} is missing or invalid ({e!r}); point at an export folder written "
+                "by dpc_mjx.io.export."
+            ) from e
+        if version != FORMAT_VERSION:
+            raise ValueError(
+                f"{d / SIDECAR} has format_version {version!r}; this file reads {FORMAT_VERSION}. "
+                "Copy inference.py from the dpc_mjx that wrote the export."
+            )
+        if enc is None:
+            raise ValueError(
+                f"The export has no encoder for arm {arm!r}; it has {sorted(encoders)}."
+            )
+        self.meta, self.arm, self.input_size = meta, arm, input_size
+        self.latent_size, self.action_size = latent, action_size
+        if len(u_scale) != action_size:
+            raise ValueError(
+                f"{d / SIDECAR}: action_scaling.u_scale has {len(u_scale)} entries, the policy "
+                f"{action_size} actions; re-export the artefacts."
+            )
+        self.scale = np.array(u_scale)  # N (f_a), N·m (tau_a)
+
+        tree = read_tree(enc_path, enc.get("sha256"))
+        mlp = _get(tree, ("params", "params", "mlp"), enc_path)
+        self._enc = _mlp(mlp, [f"hidden_{i}" for i in range(n_hidden)] + ["out"], enc_path)
+        self._enc_norm = _norm(tree, "input_norm", input_size, enc_path)
+        self._check(self._enc, input_size, latent, enc_path)
+
+        tree = read_tree(pol_path, pol.get("sha256"))
+        layers = _get(tree, ("params", "params"), pol_path)
+        self._pi = _mlp(layers, [f"hidden_{i}" for i in range(len(hidden) + 1)], pol_path)
+        self._pi_norm = _norm(tree, "obs_norm", S_BODY_SIZE + latent, pol_path)
+        self._check(self._pi, S_BODY_SIZE + latent, 2 * action_size, pol_path)
+        if [k.shape[1] for k, _ in self._pi[:-1]] != hidden:
+            raise ValueError(
+                f"{pol_path}: hidden sizes differ from {SIDECAR}'s {hidden}; re-export."
+            )
+
+    @staticmethod
+    def _check(layers: list, n_in: int, n_out: int, path: pathlib.Path) -> None:
+        found = (layers[0][0].shape[0], layers[-1][0].shape[1])
+        if found != (n_in, n_out):
+            raise ValueError(
+                f"{path} maps {found[0]} -> {found[1]} entries, {SIDECAR} says "
+                f"{n_in} -> {n_out}; re-export with dpc_mjx.io.export."
+            )
+
+    def _obs(self, obs) -> np.ndarray:
+        x = np.asarray(obs, np.float64)
+        if x.ndim not in (1, 2) or x.shape[-1] != self.input_size:
+            raise ValueError(
+                f"Observation of shape {x.shape}: the encoder of arm {self.arm!r} takes "
+                f"({self.input_size},) or (B, {self.input_size}) = [s_body ({S_BODY_SIZE}), s_arm, "
+                "p_arm] of that arm's env; pass that arm's raw observation."
+            )
+        bad = ~np.isfinite(x)
+        if bad.any():
+            raise ValueError(
+                f"Observation has {int(bad.sum())} NaN/inf entries (first at index "
+                f"{tuple(int(i) for i in np.argwhere(bad)[0])}); check the robot's state estimate."
+            )
+        return x
+
+    def _latent(self, x: np.ndarray) -> np.ndarray:
+        mean, std = self._enc_norm
+        return np.tanh(_forward(self._enc, (x - mean) / std))
+
+    def latent(self, obs) -> np.ndarray:
+        """z (..., latent_size) in (-1, 1)."""
+        return self._latent(self._obs(obs))
+
+    def action(self, obs) -> np.ndarray:
+        """Deterministic action a (..., action_size) in [-1, 1]: the actor's mode."""
+        x = self._obs(obs)
+        pi_in = np.concatenate([x[..., :S_BODY_SIZE], self._latent(x)], axis=-1)
+        mean, std = self._pi_norm
+        return np.tanh(_forward(self._pi, (pi_in - mean) / std)[..., : self.action_size])
+
+    def u(self, obs) -> np.ndarray:
+        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6), world frame, about the A1 COM."""
+        if self.action_size != 6:
+            raise ValueError(
+                f"u needs a 6-D action [f_a, tau_a], this policy has {self.action_size}."
+            )
+        return self.action(obs) * self.scale
+
+
+__all__ = ["FORMAT_VERSION", "NumpyPolicy", "read_tree"]

@@ -1,0 +1,431 @@
+"""A whole DPC run as one function: data -> adapter -> SAC -> export -> evaluation.
+
+    config = RunConfig(arm="regular", samples=100_000, sac=SacConfig(num_timesteps=500_000))
+    summary = train_and_evaluate(config, "runs/regular")
+
+The run folder (every file written atomically; `resume=True` continues a killed run):
+
+    config.json          the RunConfig
+    adapter/             the trained adapter (`adapter.checkpoint`): adapter.json, *.msgpack
+    sac/                 sac_log.csv (one row per epoch) and the SAC checkpoint
+    export/              the deployable artefacts (`dpc_mjx.io.export`; `dpc-mjx eval --run`)
+    plots/               adapter_loss.png, posture_prediction.png, training_curve.png
+    eval.md              MBC vs DPC vs oracle table (`dpc_mjx.eval` protocol)
+    summary.json         wall time of every stage, sample counts, the evaluation
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+
+from dpc_mjx import adapter as adapter_lib
+from dpc_mjx import io, plots, sac
+from dpc_mjx.adapter import checkpoint as adapter_checkpoint
+from dpc_mjx.envs.registry import get_config, make
+from dpc_mjx.errors import DpcError
+from dpc_mjx.eval import TABLE_HEADER, CellResult, evaluate, table_row
+from dpc_mjx.sac import warm_start
+from dpc_mjx.serialization import jsonable, read_json, write_json
+
+SHIPPED = pathlib.Path(__file__).parent / "artefacts" / "regular"  # the trained run's export
+CONFIG_FILE = "config.json"
+ACTOR_INITS = ("random", "oracle_regression")
+DATA_FILE = "data.npz"  # the adapter's samples, in the run's adapter folder
+SUMMARY_FILE = "summary.json"
+
+
+# The SAC settings of the shipped run (docs/results.md, "DPC on the reaching task"): a longer run
+# than SacConfig's default, larger batches, a shorter horizon (a push acts within ~0.2-1 s), a
+# low starting temperature and a slow actor, so that the oracle-regressed actor is refined rather
+# than overwritten; the critics learn alone for the first 20,000 gradient steps.
+TRAINED_SAC = sac.SacConfig(
+    num_timesteps=1_000_000,
+    batch_size=512,
+    discounting=0.97,
+    init_alpha=0.01,
+    actor_warmup_steps=20_000,
+    actor_learning_rate=3e-5,
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class RunConfig:
+    """Everything a run does (the env's own options are `env_overrides` of its task config).
+
+    The defaults are the recipe of the shipped `regular` run. The paper's recipe (SAC from a
+    random actor) is `actor_init="random"` with `SacConfig()`'s settings, e.g. on the command line
+    `--set actor_init=random sac.init_alpha=1.0 sac.actor_warmup_steps=0`.
+    """
+
+    task: str = "a1_arm/reaching"
+    arm: str = "regular"  # a variant name (`dpc_mjx.robots.VARIANTS`)
+    env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
+    samples: int = 100_000  # random-motion transitions for the adapter
+    data_envs: int = 64
+    adapter: adapter_lib.AdapterConfig = adapter_lib.AdapterConfig()
+    sac: sac.SacConfig = TRAINED_SAC
+    eval_episodes: int = 64
+    eval_steps: int = 1000  # env steps of 20 ms
+    eval_controllers: tuple[str, ...] = ("mbc", "dpc", "oracle")
+    # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
+    # the oracle's u over the adapter's samples, `sac.warm_start`; then SAC as usual)
+    actor_init: str = "oracle_regression"
+    seed: int = 0
+
+    def validate(self) -> None:
+        get_config(self.task, **self.env_overrides)  # task name and overrides
+        for name in ("samples", "data_envs", "eval_episodes", "eval_steps"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 1:
+                raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
+        self.adapter.validate()
+        self.sac.validate()
+        if self.actor_init not in ACTOR_INITS:
+            raise DpcError(f"actor_init={self.actor_init!r} is not one of {list(ACTOR_INITS)}.")
+
+    def to_json(self) -> dict:
+        return jsonable(dataclasses.asdict(self))
+
+    @classmethod
+    def from_json(cls, d: dict) -> RunConfig:
+        try:
+            d = dict(d)
+            d["adapter"] = adapter_lib.AdapterConfig(**_tuples(d["adapter"]))
+            d["sac"] = sac.SacConfig(**_tuples(d["sac"]))
+            d["eval_controllers"] = tuple(d["eval_controllers"])
+            d["env_overrides"] = _tuples(d["env_overrides"])
+            return cls(**d)
+        except (KeyError, TypeError) as e:
+            raise DpcError(f"Not a RunConfig ({e}); start a new run folder.") from e
+
+    def replace(self, **dotted: Any) -> RunConfig:
+        """A copy with overrides by dotted name: `arm='longer'`, `sac.num_envs=32`,
+        `adapter.epochs=20`, `env.push_force=(0, 60)`."""
+        top, sub = {}, {"adapter": {}, "sac": {}, "env": {}}
+        for key, value in dotted.items():
+            head, _, rest = key.partition(".")
+            if rest and head in sub:
+                sub[head][rest] = value
+            elif not rest and head in {f.name for f in dataclasses.fields(self)}:
+                top[key] = value
+            else:
+                raise DpcError(
+                    f"Unknown run option {key!r}; use a RunConfig field "
+                    f"({[f.name for f in dataclasses.fields(self)]}) or adapter.<field>, "
+                    "sac.<field>, env.<field>."
+                )
+        out = dataclasses.replace(self, **top)
+        try:
+            out = dataclasses.replace(
+                out,
+                adapter=dataclasses.replace(out.adapter, **sub["adapter"]),
+                sac=dataclasses.replace(out.sac, **sub["sac"]),
+                env_overrides={**out.env_overrides, **sub["env"]},
+            )
+        except TypeError as e:
+            raise DpcError(f"Unknown option in {sorted(dotted)}: {e}.") from e
+        out.validate()
+        return out
+
+
+def _tuples(d: dict) -> dict:
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+
+
+def train_and_evaluate(
+    config: RunConfig, run_dir: str | pathlib.Path, *, resume: bool = False, progress: bool = True
+) -> dict:
+    """Run every stage into `run_dir`; returns the summary (also `summary.json`)."""
+    config.validate()
+    run_dir = pathlib.Path(run_dir)
+    start_run(config, run_dir, resume=resume)
+    timings: dict[str, float] = {}
+    adapter = train_adapter(config, run_dir, resume=resume, progress=progress, timings=timings)
+    result = train_policy(config, run_dir, adapter, resume=resume, progress=progress)
+    timings.update(
+        {f"sac_{k}": v for k, v in result.timing.items()},
+        sac_wall_seconds=result.history[-1]["wall_seconds"] if result.history else 0.0,
+    )
+    export_dir = export(config, run_dir, adapter, result)
+    t0 = time.perf_counter()
+    cells = evaluate_run(config, run_dir, export_dir)
+    timings["eval_seconds"] = time.perf_counter() - t0
+    summary = {
+        "config": config.to_json(),
+        "samples": adapter.history["samples"],
+        "adapter_env_steps": adapter.history["env_steps"],
+        "sac_env_steps": result.history[-1]["env_steps"] if result.history else 0,
+        "sac_grad_steps": result.history[-1]["grad_steps"] if result.history else 0,
+        "sac_selected_epoch": result.selected_epoch,
+        "timings_seconds": timings,
+        "eval": [dataclasses.asdict(c) for c in cells],
+    }
+    write_json(run_dir / SUMMARY_FILE, summary)
+    return summary
+
+
+def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
+    """The `RunConfig` a run folder was started with."""
+    path = pathlib.Path(run_dir) / CONFIG_FILE
+    return RunConfig.from_json(read_json(path, "run config", hint="is this a run folder?"))
+
+
+def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None:
+    """Write the run's config; when resuming, check that it is the one the folder holds."""
+    run_dir = pathlib.Path(run_dir)
+    path = run_dir / CONFIG_FILE
+    if resume:
+        saved = read_json(path, "run config", hint="start the run without --resume")
+        if saved != config.to_json():
+            raise DpcError(
+                f"{path} holds another configuration than this run's; resume with the same "
+                "options, or start a new run folder."
+            )
+    elif path.exists():
+        raise DpcError(f"{run_dir} already holds a run; resume it or pick another folder.")
+    write_json(path, config.to_json())
+
+
+def train_adapter(
+    config: RunConfig,
+    run_dir: pathlib.Path,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+    timings: dict | None = None,
+) -> adapter_lib.Adapter:
+    """Collect random-motion data with MBC and train the adapter (or load it when resuming)."""
+    folder = run_dir / "adapter"
+    if resume and (folder / adapter_checkpoint.RECORD).exists():
+        print(f"adapter: loading {folder}", flush=True)
+        return adapter_checkpoint.load(folder)
+    env = make(config.task, arm=config.arm, controller="mbc", **config.env_overrides)
+    print(f"adapter: collecting {config.samples:,} samples ({config.arm}, MBC)", flush=True)
+    data = adapter_lib.collect(
+        env, config.samples, n_envs=config.data_envs, seed=config.seed, progress=progress
+    )
+    cfg = dataclasses.replace(config.adapter, seed=config.seed)
+    trained = adapter_lib.train(data, cfg, progress=progress)
+    data.save(folder / DATA_FILE)  # kept for the actor's warm start (and for analysis)
+    adapter_checkpoint.save(folder, trained)
+    h = trained.history
+    print(
+        f"adapter: {h['samples']:,} samples from {h['env_steps']:,} env steps in "
+        f"{h['collect_seconds']:.0f} s; trained {h['epochs']} epochs in {h['seconds']:.0f} s; "
+        f"held-out NLL {min(h['val_nll']):.3f} (constant predictor "
+        f"{h['constant_val_nll']:.3f}, s_body alone {h.get('body_only_val_nll', np.nan):.3f})",
+        flush=True,
+    )
+    if timings is not None:
+        timings.update(data_seconds=h["collect_seconds"], adapter_seconds=h["seconds"])
+    plots.adapter_loss(h, run_dir / "plots" / "adapter_loss.png")
+    _, held_out = data.split(cfg.val_fraction)
+    posture_figure(trained, held_out, run_dir / "plots" / "posture_prediction.png")
+    return trained
+
+
+def posture_figure(trained: adapter_lib.Adapter, data: adapter_lib.Dataset, path, seconds=6.0):
+    """The paper's predicted-vs-real posture change, for the first env found in `data`."""
+    rows = np.flatnonzero(data.env_id == data.env_id[0])[: round(seconds / 0.02)]
+    part = data.take(rows)
+    z = adapter_lib.encode(trained.config, trained.encoder, part.encoder_input)
+    mean, std = adapter_lib.decode(trained.config, trained.decoder, z, part.s_body)
+    t = 0.02 * np.arange(len(rows))
+    return plots.posture_prediction(t, part.s_drp_next, np.asarray(mean), np.asarray(std), path)
+
+
+def train_policy(
+    config: RunConfig,
+    run_dir: pathlib.Path,
+    adapter: adapter_lib.Adapter,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+) -> sac.TrainResult:
+    """SAC on the latent-observation env of the run's arm."""
+    env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
+    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder)
+    sac_config = dataclasses.replace(config.sac, seed=config.seed)
+    folder = run_dir / "sac"
+    has_checkpoint = (folder / "checkpoint.json").exists()
+    print(
+        f"sac: {'resuming' if resume and has_checkpoint else 'training'} to "
+        f"{sac_config.num_timesteps:,} env steps ({sac_config.num_envs} envs)",
+        flush=True,
+    )
+    actor_init = None
+    if config.actor_init == "oracle_regression":
+        actor_init = _oracle_regression(config, run_dir, adapter, env.config.u_scale)
+    result = sac.train(
+        latent_env,
+        sac_config,
+        folder,
+        resume=resume and has_checkpoint,
+        progress=progress,
+        actor_init=actor_init,
+    )
+    if result.history:
+        plots.training_curve(result.history, run_dir / "plots" / "training_curve.png")
+    return result
+
+
+def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, u_scale):
+    """The `actor_init` of `sac.train` that regresses the actor on the oracle's u."""
+
+    def init(trainer, carry):
+        data = adapter_lib.Dataset.load(run_dir / "adapter" / DATA_FILE)
+        carry, report = warm_start.regress_actor(
+            trainer, carry, adapter.config, adapter.encoder, data, u_scale, seed=config.seed
+        )
+        write_json(run_dir / "sac" / "warm_start.json", report)
+        r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
+        print(
+            f"sac: actor regressed on the oracle's u ({report['samples']:,} samples; "
+            f"held-out R^2 per u component {r2})",
+            flush=True,
+        )
+        return carry
+
+    return init
+
+
+def export(
+    config: RunConfig,
+    run_dir: pathlib.Path,
+    adapter: adapter_lib.Adapter,
+    result: sac.TrainResult,
+    out: str | pathlib.Path | None = None,
+) -> pathlib.Path:
+    """The run's deployable artefacts in `out` (default `run_dir/export`)."""
+    return io.export(
+        run_dir / "export" if out is None else out,
+        adapter_config=adapter.config,
+        policy=result.policy,
+        decoder=adapter.decoder,
+        encoders={config.arm: adapter.encoder},
+        arms={config.arm: config.arm},
+        env_config=get_config(config.task, **config.env_overrides),
+        sac_config=dataclasses.asdict(result.config),
+        extra={
+            "task": config.task,
+            "run": str(run_dir),
+            "sac_selected_epoch": result.selected_epoch,
+            "sac_env_steps": result.history[-1]["env_steps"] if result.history else 0,
+            "actor_init": config.actor_init,
+        },
+    )
+
+
+def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[CellResult]:
+    """The evaluation protocol on the run's arm; writes `eval.md` and prints the table."""
+    artefacts = io.load(export_dir)
+    print(TABLE_HEADER, flush=True)
+    cells = evaluate(
+        [config.arm],
+        list(config.eval_controllers),
+        task=config.task,
+        episodes=config.eval_episodes,
+        steps=config.eval_steps,
+        seed=config.seed + 1000,  # other episodes than training's
+        dpc_policy_for=artefacts.dpc_policy,
+        overrides=config.env_overrides,
+        on_result=lambda c: print(table_row(c), flush=True),
+    )
+    text = "\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n"
+    (run_dir / "eval.md").write_text(text)
+    return cells
+
+
+def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = None) -> pathlib.Path:
+    """Export a run's saved adapter and latest SAC checkpoint (no training) to `out`
+    (default `run_dir/export`)."""
+    run_dir = pathlib.Path(run_dir)
+    config = read_run_config(run_dir)
+    adapter = adapter_checkpoint.load(run_dir / "adapter")
+    env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
+    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder)
+    sac_config = dataclasses.replace(config.sac, seed=config.seed)
+    result = sac.restore_policy(latent_env, sac_config, run_dir / "sac")
+    return export(config, run_dir, adapter, result, out)
+
+
+def env_overrides(artefacts: io.Artefacts) -> dict:
+    """The env options an export was trained with (its sidecar's env_config), to evaluate and
+    transfer under the same disturbances; the controller is chosen per use."""
+    saved = artefacts.meta.get("env_config") or {}
+    return {
+        k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "controller"
+    }
+
+
+def transfer_arm(
+    export_dir: str | pathlib.Path,
+    arm: str,
+    *,
+    samples: int = 30_000,
+    task: str = "a1_arm/reaching",
+    seed: int = 0,
+    n_envs: int = 64,
+    progress: bool = True,
+) -> dict:
+    """Paper §III-C: collect `samples` random-motion transitions of a new `arm` (MBC), train its
+    encoder against the export's frozen decoder, and add it to the export. Returns the
+    encoder's training history."""
+    artefacts = io.load(export_dir)
+    env = make(task, arm=arm, controller="mbc", **env_overrides(artefacts))
+    print(f"transfer: collecting {samples:,} samples ({arm}, MBC)", flush=True)
+    data = adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress)
+    config = dataclasses.replace(artefacts.adapter_config, seed=seed)
+    encoder, history = adapter_lib.transfer(data, artefacts.decoder, config, progress=progress)
+    io.add_encoder(export_dir, arm, encoder, arm, replace=True)
+    print(
+        f"transfer: {arm} encoder from {len(data):,} samples ({data.env_steps:,} env steps, "
+        f"{data.seconds:.0f} s) trained in {history['seconds']:.0f} s; held-out NLL "
+        f"{min(history['val_nll']):.3f} (constant predictor {history['constant_val_nll']:.3f}); "
+        f"added to {export_dir}",
+        flush=True,
+    )
+    return history
+
+
+def evaluate_export(
+    export_dir: str | pathlib.Path,
+    *,
+    arms: list[str] | None = None,
+    controllers: list[str] = ("mbc", "dpc", "oracle"),
+    task: str = "a1_arm/reaching",
+    episodes: int = 64,
+    steps: int = 1000,
+    seed: int = 1000,
+    out: str | pathlib.Path | None = None,
+) -> list[CellResult]:
+    """The evaluation protocol for the arms of an export (default: every arm with an encoder),
+    under the env options it was trained with; prints the table (and writes it to `out`)."""
+    artefacts = io.load(export_dir)
+    arms = list(arms or sorted(artefacts.encoders))
+    if "dpc" in controllers:
+        for arm in arms:
+            artefacts.encoder(arm)  # a missing encoder fails before any compile
+    trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
+    # the training task's disturbances; another task brings its own
+    overrides = env_overrides(artefacts) if task == trained_on else {}
+    print(TABLE_HEADER, flush=True)
+    cells = evaluate(
+        arms,
+        list(controllers),
+        task=task,
+        episodes=episodes,
+        steps=steps,
+        seed=seed,
+        dpc_policy_for=artefacts.dpc_policy,
+        overrides=overrides,
+        on_result=lambda c: print(table_row(c), flush=True),
+    )
+    if out is not None:
+        pathlib.Path(out).write_text("\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n")
+    return cells

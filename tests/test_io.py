@@ -1,0 +1,555 @@
+"""Artefact I/O: export/load round trip, numpy inference, failure messages, SAC checkpoints.
+
+Fast: no env and no MJX; random-initialised float32 networks with random normaliser statistics.
+"""
+
+import dataclasses
+import json
+import math
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import optax
+import pytest
+from brax.training import replay_buffers
+from brax.training.acme import running_statistics
+from brax.training.types import Transition
+from flax import struct
+
+import dpc_mjx.io as dio
+from dpc_mjx import serialization as ser
+from dpc_mjx.adapter.networks import (
+    AdapterConfig,
+    DecoderState,
+    EncoderState,
+    Normalizer,
+    decoder_module,
+    encode,
+    encoder_module,
+)
+from dpc_mjx.envs.config import EnvConfig
+from dpc_mjx.errors import DpcError
+from dpc_mjx.inference import NumpyPolicy
+from dpc_mjx.robots import spec_json
+from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
+from dpc_mjx.robots.variants import VARIANTS
+from dpc_mjx.sac import checkpoint
+from dpc_mjx.sac.networks import make_networks
+from dpc_mjx.sac.policy import PolicyState, act
+from dpc_mjx.sac.train import BestPolicy, Carry, SacConfig, TrainingState
+
+_NUMPY_TOL = 1e-5  # numpy (float64) vs JAX (float32) inference, absolute, on z and a in [-1, 1]
+HIDDEN = (32, 24)  # not the defaults, so sizes must come from the sidecar
+CONFIG = AdapterConfig(hidden=HIDDEN)
+ENV_CONFIG = EnvConfig(max_force=50.0, max_torque=15.0)
+N_IN = {"regular": 26, "long": 26, "so100": 29}  # 11 + 2 n + n_act
+ARM_SPECS = {"regular": "regular", "long": ArmSpec(upper_arm_length=0.28)}
+
+
+def _norm(key: jax.Array, n: int) -> Normalizer:
+    k1, k2 = jax.random.split(key)
+    mean = jax.random.normal(k1, (n,))
+    std = jax.random.uniform(k2, (n,), minval=0.5, maxval=2.0)  # ~ U(0.5, 2)
+    return Normalizer(mean=mean, std=std)
+
+
+def _encoder(seed: int, n_in: int, config: AdapterConfig = CONFIG) -> EncoderState:
+    k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
+    params = encoder_module(config).init(k1, jp.zeros(n_in))
+    return EncoderState(params=params, input_norm=_norm(k2, n_in))
+
+
+def _decoder(seed: int) -> DecoderState:
+    k1, k2, k3 = jax.random.split(jax.random.PRNGKey(seed), 3)
+    params = decoder_module(CONFIG).init(k1, jp.zeros(CONFIG.latent_size), jp.zeros(11))
+    return DecoderState(params=params, body_norm=_norm(k2, 11), target_norm=_norm(k3, 2))
+
+
+def _policy(seed: int) -> PolicyState:
+    obs_size = 11 + CONFIG.latent_size
+    k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
+    params = make_networks(obs_size, 6, HIDDEN).policy_network.init(k1)
+    return PolicyState(params=params, obs_norm=_norm(k2, obs_size), hidden=HIDDEN, action_size=6)
+
+
+def _obs(n_in: int, batch: int = 64, seed: int = 7) -> np.ndarray:
+    return np.asarray(2.0 * jax.random.normal(jax.random.PRNGKey(seed), (batch, n_in)))
+
+
+@pytest.fixture(scope="module")
+def trained():
+    return {
+        "policy": _policy(1),
+        "decoder": _decoder(2),
+        "encoders": {"regular": _encoder(3, N_IN["regular"]), "long": _encoder(4, N_IN["long"])},
+    }
+
+
+@pytest.fixture(scope="module")
+def exported(trained, tmp_path_factory) -> pathlib.Path:
+    return dio.export(
+        tmp_path_factory.mktemp("export") / "run",
+        adapter_config=CONFIG,
+        policy=trained["policy"],
+        decoder=trained["decoder"],
+        encoders=trained["encoders"],
+        arms=ARM_SPECS,
+        env_config=ENV_CONFIG,
+        sac_config={"hidden": HIDDEN, "num_envs": 8},
+        extra={"note": "test"},
+    )
+
+
+@pytest.fixture
+def export_copy(exported, tmp_path) -> pathlib.Path:
+    return pathlib.Path(shutil.copytree(exported, tmp_path / "copy"))
+
+
+def _assert_trees_equal(a, b):
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    assert jax.tree.structure(a) == jax.tree.structure(b)
+    for x, y in zip(la, lb, strict=True):
+        assert np.asarray(x).dtype == np.asarray(y).dtype
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+# --------------------------------------------------------------------------- export / load
+
+
+def test_export_load_round_trip_is_bit_exact(trained, exported):
+    loaded = dio.load(exported)
+    assert loaded.adapter_config == CONFIG
+    assert loaded.policy.hidden == HIDDEN and loaded.policy.action_size == 6
+    _assert_trees_equal(loaded.policy, trained["policy"])
+    _assert_trees_equal(loaded.decoder, trained["decoder"])
+    assert sorted(loaded.encoders) == ["long", "regular"]
+    for arm, enc in trained["encoders"].items():
+        _assert_trees_equal(loaded.encoders[arm], enc)
+        obs = _obs(N_IN[arm])
+        z0, z1 = encode(CONFIG, enc, obs), encode(CONFIG, loaded.encoders[arm], obs)
+        np.testing.assert_array_equal(np.asarray(z0), np.asarray(z1))
+        a0 = act(trained["policy"], jp.concatenate([obs[:, :11], z0], -1))
+        a1 = loaded.dpc_policy(arm)(obs, None)
+        np.testing.assert_array_equal(np.asarray(a0), np.asarray(a1))
+
+
+def test_sidecar_describes_the_networks(exported):
+    meta = json.loads((exported / dio.SIDECAR).read_text())
+    assert meta["format_version"] == dio.FORMAT_VERSION
+    assert meta["library_version"].startswith("0.")
+    assert meta["created"].endswith("+00:00")
+    assert meta["adapter_config"]["hidden"] == list(HIDDEN)
+    p = meta["policy"]
+    assert (p["hidden"], p["action_size"], p["observation_size"]) == (list(HIDDEN), 6, 13)
+    assert p["observation_layout"][:3] == ["roll", "pitch", "wx"]
+    assert p["observation_layout"][8:] == ["cmd_vx", "cmd_vy", "cmd_yaw", "z_0", "z_1"]
+    assert meta["action_scaling"]["u_scale"] == [50.0] * 3 + [15.0] * 3
+    assert meta["encoders"]["regular"]["input_size"] == 26
+    assert meta["encoders"]["regular"]["file"] == "encoder_regular.msgpack"
+    assert meta["env_config"]["max_force"] == 50.0
+    assert meta["sac_config"] == {"hidden": list(HIDDEN), "num_envs": 8}
+    assert meta["extra"] == {"note": "test"}
+    assert not list(exported.glob("*.tmp"))  # atomic writes leave no temp files
+
+
+def test_arm_specs_round_trip_through_the_sidecar(exported):
+    loaded = dio.load(exported)
+    assert loaded.arm_spec("regular") == "regular"
+    assert loaded.arm_spec("long") == ArmSpec(upper_arm_length=0.28)
+    for spec in (
+        VARIANTS["double"],
+        UrdfArm("z1", Mount((0.1, 0.0, 0.057), yaw=0.5)),
+        ArmSpec(gripper_mass=0.5, ee_shape="plate"),
+    ):
+        assert spec_json.arm_from_json(json.loads(json.dumps(spec_json.arm_to_json(spec)))) == spec
+    with pytest.raises(DpcError, match="Unknown arm variant"):
+        spec_json.arm_to_json("no_such_arm")
+    with pytest.raises(DpcError, match="not one of"):
+        spec_json.arm_from_json({"type": "os.system", "command": "true"})
+
+
+def test_add_encoder_adds_an_arm(export_copy):
+    enc = _encoder(5, N_IN["so100"])
+    dio.add_encoder(export_copy, "so100", enc, UrdfArm("so100"))
+    loaded = dio.load(export_copy)
+    assert sorted(loaded.encoders) == ["long", "regular", "so100"]
+    _assert_trees_equal(loaded.encoders["so100"], enc)
+    assert loaded.arm_spec("so100") == UrdfArm("so100")
+    assert NumpyPolicy(export_copy, "so100").action(_obs(29)).shape == (64, 6)
+    with pytest.raises(DpcError, match="already has an encoder for arm 'so100'"):
+        dio.add_encoder(export_copy, "so100", enc, "so100")
+    dio.add_encoder(export_copy, "so100", _encoder(6, 29), "so100", replace=True)
+    assert dio.load(export_copy).arm_spec("so100") == "so100"
+    wrong_latent = _encoder(7, 29, AdapterConfig(hidden=HIDDEN, latent_size=3))
+    with pytest.raises(DpcError, match="latent_size=2"):
+        dio.add_encoder(export_copy, "z1", wrong_latent, "z1")
+    with pytest.raises(DpcError, match="has no encoder for arm 'z1'"):
+        dio.load(export_copy).encoder("z1")
+
+
+def test_export_refuses_inconsistent_artefacts(trained, tmp_path):
+    kwargs = dict(adapter_config=CONFIG, policy=trained["policy"], decoder=trained["decoder"])
+    with pytest.raises(DpcError, match="arm spec"):
+        dio.export(tmp_path, **kwargs, encoders=trained["encoders"], arms={"regular": "regular"})
+    big = AdapterConfig(hidden=HIDDEN, latent_size=3)
+    encoders = {"regular": _encoder(3, 26, big)}
+    with pytest.raises(DpcError, match="policy is inconsistent"):
+        big_kwargs = kwargs | {"adapter_config": big}
+        dio.export(tmp_path, **big_kwargs, encoders=encoders, arms={"regular": "regular"})
+    with pytest.raises(DpcError, match="cannot name a file"):
+        dio.export(tmp_path, **kwargs, encoders={"a/b": encoders["regular"]}, arms={"a/b": "none"})
+    assert not (tmp_path / dio.SIDECAR).exists()
+
+
+def _edit_sidecar(fn):
+    def edit(d: pathlib.Path):
+        meta = json.loads((d / dio.SIDECAR).read_text())
+        fn(meta)
+        (d / dio.SIDECAR).write_text(json.dumps(meta))
+
+    return edit
+
+
+def _truncate(name):
+    def edit(d: pathlib.Path):
+        data = (d / name).read_bytes()
+        (d / name).write_bytes(data[: len(data) // 2])
+
+    return edit
+
+
+def _other_policy(d: pathlib.Path):
+    ser.write_msgpack(d / "policy.msgpack", _policy(99))  # same shapes, other values
+
+
+BROKEN = {
+    "truncated msgpack": (
+        _truncate("policy.msgpack"),
+        ["policy.msgpack (policy)", "truncated or corrupt", "re-export"],
+    ),
+    "garbage bytes": (
+        lambda d: (d / "decoder.msgpack").write_bytes(b"not a msgpack file"),
+        ["decoder.msgpack (decoder)", "truncated or corrupt"],
+    ),
+    "missing file": (
+        lambda d: (d / "encoder_long.msgpack").unlink(),
+        ["encoder for arm 'long'", "does not exist"],
+    ),
+    "missing sidecar": (lambda d: (d / dio.SIDECAR).unlink(), ["dpc.json", "does not exist"]),
+    "corrupt json": (
+        lambda d: (d / dio.SIDECAR).write_text('{"format_version": 1,'),
+        ["dpc.json", "not valid JSON", "re-export"],
+    ),
+    "wrong format_version": (
+        _edit_sidecar(lambda m: m.update(format_version=99)),
+        ["format_version 99", "reads format_version 1", "re-export"],
+    ),
+    "other major version": (
+        _edit_sidecar(lambda m: m.update(library_version="7.0.0")),
+        ["dpc_mjx 7.0.0", "another major version"],
+    ),
+    "missing key": (_edit_sidecar(lambda m: m.pop("decoder")), ["lacks the keys", "decoder"]),
+    "hidden size disagrees": (
+        _edit_sidecar(lambda m: m["policy"].update(hidden=[64, 24])),
+        [
+            "policy.msgpack (policy) does not match",
+            "hidden_0.kernel",
+            "is float32 (13, 32), expected float32 (13, 64)",
+        ],
+    ),
+    "encoder input size disagrees": (
+        _edit_sidecar(lambda m: m["encoders"]["regular"].update(input_size=30)),
+        ["encoder for arm 'regular'", "input_norm.mean", "(30,)", "encoder trained for this arm"],
+    ),
+    "observation size disagrees": (
+        _edit_sidecar(lambda m: m["policy"].update(observation_size=14)),
+        ["observation_size=14", "latent_size (2)"],
+    ),
+    "file from another export": (_other_policy, ["policy.msgpack (policy)", "sha256 differs"]),
+    "file outside the folder": (
+        _edit_sidecar(lambda m: m["policy"].update(file="../policy.msgpack")),
+        ["policy.file must name a file in the export folder"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(BROKEN))
+def test_load_fails_with_a_clear_message(export_copy, case):
+    edit, fragments = BROKEN[case]
+    edit(export_copy)
+    with pytest.raises(DpcError) as info:
+        dio.load(export_copy)
+    message = str(info.value)
+    for fragment in fragments:
+        assert fragment in message, (fragment, message)
+
+
+def test_read_msgpack_names_the_mismatching_leaf(tmp_path):
+    path = tmp_path / "x.msgpack"
+    ser.write_msgpack(path, {"a": np.zeros((2, 3), np.float32), "b": {"c": np.zeros(4, np.int32)}})
+    template = {"a": np.zeros((2, 3), np.float32), "b": {"c": np.zeros(5, np.int32)}}
+    with pytest.raises(DpcError, match=r"'b\.c' is int32 \(4,\), expected int32 \(5,\)"):
+        ser.read_msgpack(path, template, "thing")
+    with pytest.raises(DpcError, match="missing leaf 'd'"):
+        ser.read_msgpack(path, template | {"d": np.zeros(1)}, "thing")
+    out = ser.read_msgpack(
+        path, {"a": np.ones((2, 3), np.float32), "b": {"c": np.ones(4, np.int32)}}, "x"
+    )
+    assert out["a"].flags.writeable and not out["a"].any()
+
+
+def test_read_json_rejects_corrupt_json(tmp_path):
+    path = tmp_path / "x.json"
+    ser.write_json(path, {"a": np.float32(1.5), "b": (1, 2), "c": np.arange(3)})
+    assert ser.read_json(path, "x") == {"a": 1.5, "b": [1, 2], "c": [0, 1, 2]}
+    path.write_text("{]")
+    with pytest.raises(DpcError, match="not valid JSON"):
+        ser.read_json(path, "x")
+    with pytest.raises(DpcError, match="Cannot write"):
+        ser.write_json(path, {"a": object()})
+
+
+def test_atomic_writes_get_the_usual_file_mode(tmp_path):
+    """Files are written through a temp file (mode 0600) but end up as open() would make them,
+    so an export can be shared or shipped."""
+    plain, atomic = tmp_path / "plain", tmp_path / "atomic"
+    plain.write_bytes(b"x")
+    ser.write_bytes(atomic, b"x")
+    assert atomic.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
+
+
+# --------------------------------------------------------------------------- numpy inference
+
+
+def test_numpy_policy_matches_jax(trained, exported):
+    scale = np.array([50.0] * 3 + [15.0] * 3)  # ENV_CONFIG's max_force (N), max_torque (N·m)
+    for arm, enc in trained["encoders"].items():
+        obs = _obs(N_IN[arm], seed=11)
+        z = encode(CONFIG, enc, obs)
+        a = act(trained["policy"], jp.concatenate([obs[:, :11], z], -1))
+        policy = NumpyPolicy(exported, arm)
+        np.testing.assert_allclose(policy.latent(obs), z, atol=_NUMPY_TOL, rtol=0)
+        np.testing.assert_allclose(policy.action(obs), a, atol=_NUMPY_TOL, rtol=0)
+        np.testing.assert_allclose(policy.u(obs), a * scale, atol=_NUMPY_TOL * 50.0, rtol=0)
+        assert policy.action(obs[0]).shape == (6,) and policy.latent(obs[0]).shape == (2,)
+        np.testing.assert_allclose(policy.u(obs[3]), policy.u(obs)[3], atol=1e-12)
+
+
+def test_numpy_policy_rejects_bad_input(exported, export_copy):
+    policy = NumpyPolicy(exported, "regular")
+    with pytest.raises(ValueError, match=r"takes \(26,\) or \(B, 26\)"):
+        policy.action(np.zeros(29))
+    obs = np.zeros((2, 26))
+    obs[1, 4] = np.nan
+    with pytest.raises(ValueError, match=r"1 NaN/inf entries \(first at index \(1, 4\)\)"):
+        policy.u(obs)
+    with pytest.raises(ValueError, match="no encoder for arm 'z1'"):
+        NumpyPolicy(exported, "z1")
+    _truncate("policy.msgpack")(export_copy)
+    with pytest.raises(ValueError, match="sha256 differs"):
+        NumpyPolicy(export_copy, "regular")
+    _edit_sidecar(lambda m: m.update(format_version=2))(export_copy)
+    with pytest.raises(ValueError, match="format_version 2"):
+        NumpyPolicy(export_copy, "regular")
+
+
+def test_inference_imports_no_jax(exported):
+    import dpc_mjx.inference
+
+    assert dpc_mjx.inference.FORMAT_VERSION == dio.FORMAT_VERSION
+    script = f"""
+import importlib.util, sys
+import numpy as np
+spec = importlib.util.spec_from_file_location("dpc_inference", {dpc_mjx.inference.__file__!r})
+mod = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(mod)
+policy = mod.NumpyPolicy({str(exported)!r}, "regular")
+assert policy.u(np.zeros(26)).shape == (6,)
+loaded = [m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib", "flax", "dpc_mjx")]
+assert not loaded, loaded
+"""
+    result = subprocess.run(
+        [sys.executable, "-c", script],
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd="/",
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+
+
+# --------------------------------------------------------------------------- checkpoints
+
+
+@struct.dataclass
+class _Carry:
+    """A small stand-in for `sac.train.Carry`."""
+
+    params: dict
+    opt: optax.OptState
+    key: jax.Array
+    epoch: jax.Array  # () int32
+
+
+META = {"sac_config": {"batch_size": 256, "hidden": (128, 128)}, "observation_size": 13}
+HISTORY = [{"epoch": 1, "mean_return": float("nan")}, {"epoch": 2, "mean_return": -3.5}]
+
+
+def _carry(seed: int, epoch: int, rows: int = 3) -> _Carry:
+    k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
+    params = {"w": jax.random.normal(k1, (rows, 4)), "b": jp.zeros(4)}
+    tx = optax.adam(1e-3)
+    opt = tx.init(params)
+    for _ in range(2):  # non-trivial moments and count
+        grads = jax.tree.map(lambda p: p + 1.0, params)
+        updates, opt = tx.update(grads, opt)
+        params = optax.apply_updates(params, updates)
+    return _Carry(params=params, opt=opt, key=k2, epoch=jp.asarray(epoch, jp.int32))
+
+
+def test_checkpoint_round_trip_is_exact(tmp_path):
+    carry = _carry(0, epoch=2)
+    checkpoint.save(tmp_path, carry, META, HISTORY)
+    restored, history = checkpoint.restore(tmp_path, _carry(1, epoch=0), META)
+    _assert_trees_equal(restored, carry)
+    assert all(isinstance(x, jax.Array) for x in jax.tree.leaves(restored))
+    assert int(restored.epoch) == 2
+    assert math.isnan(history[0]["mean_return"]) and history[1] == HISTORY[1]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [checkpoint.RECORD, checkpoint.MSGPACK]
+
+
+def test_checkpoint_restore_without_checkpoint(tmp_path):
+    with pytest.raises(DpcError, match="No checkpoint.*without resume=True"):
+        checkpoint.restore(tmp_path, _carry(0, 0), META)
+
+
+def test_checkpoint_meta_mismatch_names_the_keys(tmp_path):
+    checkpoint.save(tmp_path, _carry(0, 2), META, HISTORY)
+    other = {"sac_config": {"batch_size": 128, "hidden": (128, 128)}, "observation_size": 14}
+    with pytest.raises(DpcError) as info:
+        checkpoint.restore(tmp_path, _carry(1, 0), other)
+    message = str(info.value)
+    assert "sac_config.batch_size: saved 256, now 128" in message
+    assert "observation_size: saved 13, now 14" in message
+    assert "hidden" not in message  # a tuple saved as a JSON list is not a difference
+
+
+CKPT_BROKEN = {
+    "truncated": (
+        _truncate(checkpoint.MSGPACK),
+        3,
+        ["SAC checkpoint", "truncated or corrupt"],
+    ),
+    "other shapes": (lambda d: None, 5, ["params.w", "expected float32 (5, 4)"]),
+    "not this record's msgpack": (
+        lambda d: ser.write_msgpack(d / checkpoint.MSGPACK, _carry(3, 2)),
+        3,
+        ["sha256"],
+    ),
+    "corrupt record": (
+        lambda d: (d / checkpoint.RECORD).write_text("{"),
+        3,
+        ["checkpoint record", "not valid JSON"],
+    ),
+    "missing msgpack": (
+        lambda d: (d / checkpoint.MSGPACK).unlink(),
+        3,
+        ["does not exist", "without resume=True"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CKPT_BROKEN))
+def test_checkpoint_corrupt_or_mismatched(tmp_path, case):
+    edit, rows, fragments = CKPT_BROKEN[case]
+    checkpoint.save(tmp_path, _carry(0, 2), META, HISTORY)
+    edit(tmp_path)
+    with pytest.raises(DpcError) as info:
+        checkpoint.restore(tmp_path, _carry(1, 0, rows), META)
+    for fragment in fragments:
+        assert fragment in str(info.value), (fragment, str(info.value))
+
+
+def test_checkpoint_round_trips_a_sac_carry(tmp_path):
+    """The real `sac.train.Carry`: brax running statistics, replay buffer, optax states."""
+    obs_size, action_size = 13, 6
+    nets = make_networks(obs_size, action_size, (16, 16))
+    dummy = Transition(
+        observation=jp.zeros(obs_size),
+        action=jp.zeros(action_size),
+        reward=0.0,
+        discount=0.0,
+        next_observation=jp.zeros(obs_size),
+        extras={"state_extras": {"truncation": 0.0}, "policy_extras": {}},
+    )
+    buffer = replay_buffers.UniformSamplingQueue(64, dummy, sample_batch_size=8)
+
+    @jax.jit
+    def init(key):
+        k1, k2, k3, k4, key = jax.random.split(key, 5)
+        pi, q, log_alpha = nets.policy_network.init(k1), nets.q_network.init(k2), jp.zeros(())
+        stats = running_statistics.init_state(jax.ShapeDtypeStruct((obs_size,), jp.float32))
+        stats = running_statistics.update(stats, jax.random.normal(k3, (5, obs_size)))
+        batch = jax.tree.map(lambda x: jp.broadcast_to(x, (10, *jp.shape(x))) + 1.0, dummy)
+        training = TrainingState(
+            policy_params=pi,
+            policy_opt=optax.adam(1e-3).init(pi),
+            q_params=q,
+            q_opt=optax.adam(1e-3).init(q),
+            target_q_params=q,
+            log_alpha=log_alpha,
+            alpha_opt=optax.adam(3e-4).init(log_alpha),
+            normalizer=stats,
+            env_steps=jp.asarray(640, jp.int32),
+            grad_steps=jp.asarray(160, jp.int32),
+        )
+        buf = buffer.insert(buffer.init(k4), batch)
+        best = BestPolicy(pi, stats, jp.asarray(12.5), jp.asarray(2, jp.int32))
+        return Carry(training, buf, key, jp.asarray(4, jp.int32), best)
+
+    carry = init(jax.random.PRNGKey(0))
+    meta = {"sac_config": dataclasses.asdict(SacConfig()), "observation_size": obs_size}
+    checkpoint.save(tmp_path, carry, meta, HISTORY)
+    template = init(jax.random.PRNGKey(1))
+    restored, _ = checkpoint.restore(tmp_path, template, meta)
+    _assert_trees_equal(restored, carry)
+    weak = [x.weak_type for x in jax.tree.leaves(template)]
+    assert [x.weak_type for x in jax.tree.leaves(restored)] == weak and any(weak)
+
+
+class _Killed(Exception):
+    pass
+
+
+def _kill(*args, **kwargs):
+    raise _Killed
+
+
+def test_checkpoint_kill_before_commit_keeps_previous(tmp_path, monkeypatch):
+    first, second = _carry(0, 2), _carry(5, 3)
+    checkpoint.save(tmp_path, first, META, HISTORY)
+    monkeypatch.setattr(ser, "write_json", _kill)  # killed after staging, before the record
+    with pytest.raises(_Killed):
+        checkpoint.save(tmp_path, second, META, [*HISTORY, {"epoch": 3}])
+    monkeypatch.undo()
+    restored, history = checkpoint.restore(tmp_path, _carry(1, 0), META)
+    _assert_trees_equal(restored, first)
+    assert len(history) == 2
+
+
+def test_checkpoint_kill_after_commit_rolls_forward(tmp_path, monkeypatch):
+    first, second = _carry(0, 2), _carry(5, 3)
+    checkpoint.save(tmp_path, first, META, HISTORY)
+    monkeypatch.setattr(checkpoint, "_promote", _kill)  # killed after the record, before rename
+    with pytest.raises(_Killed):
+        checkpoint.save(tmp_path, second, META, [*HISTORY, {"epoch": 3}])
+    monkeypatch.undo()
+    restored, history = checkpoint.restore(tmp_path, _carry(1, 0), META)
+    _assert_trees_equal(restored, second)
+    assert len(history) == 3 and not (tmp_path / checkpoint.STAGED).exists()

@@ -1,0 +1,60 @@
+"""The run configuration, the command line's argument handling and its errors (no compiling)."""
+
+import dataclasses
+import json
+
+import pytest
+
+from dpc_mjx import DpcError, cli, io
+from dpc_mjx.pipeline import SHIPPED, RunConfig, read_run_config, start_run
+from dpc_mjx.serialization import jsonable
+
+
+def test_run_config_takes_dotted_overrides_and_round_trips_through_json(tmp_path):
+    config = RunConfig().replace(
+        **{"arm": "longer", "sac.num_envs": 32, "adapter.epochs": 5, "env.push_force": (0, 40)}
+    )
+    assert config.arm == "longer" and config.sac.num_envs == 32 and config.adapter.epochs == 5
+    assert config.env_overrides == {"push_force": (0, 40)}
+    start_run(config, tmp_path, resume=False)
+    assert read_run_config(tmp_path) == config
+    with pytest.raises(DpcError, match="already holds a run"):
+        start_run(config, tmp_path, resume=False)
+    with pytest.raises(DpcError, match="another configuration"):
+        start_run(config.replace(samples=10), tmp_path, resume=True)
+
+
+def test_run_config_rejects_unknown_or_invalid_options():
+    with pytest.raises(DpcError, match="Unknown run option 'sacc.num_envs'"):
+        RunConfig().replace(**{"sacc.num_envs": 3})
+    with pytest.raises(DpcError, match="Unknown option"):
+        RunConfig().replace(**{"sac.num_env": 3})
+    with pytest.raises(DpcError, match="known options"):
+        RunConfig().replace(**{"env.push_forces": (0, 1)})
+    with pytest.raises(DpcError, match="actor_init"):
+        RunConfig().replace(actor_init="pretrained")
+    with pytest.raises(DpcError, match="samples"):
+        RunConfig().replace(samples=0)
+
+
+def test_cli_reports_bad_input_with_the_library_error(tmp_path, capsys):
+    assert cli.main(["train", "--run", str(tmp_path / "r"), "--set", "sac.num_envs"]) == 2
+    assert "--set takes name=value" in capsys.readouterr().err
+    assert cli.main(["eval", "--export", str(tmp_path / "missing")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "config.json").write_text(json.dumps({"arm": "regular"}))
+    assert cli.main(["export", "--run", str(tmp_path / "x")]) == 2
+    assert "Not a RunConfig" in capsys.readouterr().err
+    assert cli.main(["transfer", "--export", str(tmp_path / "missing"), "--arm", "so100"]) == 2
+
+
+def test_shipped_artefacts_load_and_are_the_default_recipe():
+    """`dpc-mjx eval` works without training, and `dpc-mjx train` with no options reproduces the
+    recipe the shipped policy was trained with."""
+    art = io.load(SHIPPED)
+    assert set(art.encoders) == {"regular"} and art.meta["extra"]["task"] == "a1_arm/reaching"
+    defaults = RunConfig()
+    assert art.meta["sac_config"] == jsonable(dataclasses.asdict(defaults.sac))
+    assert art.meta["adapter_config"] == jsonable(dataclasses.asdict(defaults.adapter))
+    assert art.meta["extra"]["actor_init"] == defaults.actor_init

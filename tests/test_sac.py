@@ -1,0 +1,132 @@
+"""The high-level estimator: the latent-observation env, a few hundred SAC steps on the regular
+arm (one compile, the env traced once), resume after a kill continues the counters."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+from helpers import CountTraces
+
+import dpc_mjx
+from dpc_mjx import DpcError
+from dpc_mjx.adapter import AdapterConfig, Dataset, EncoderState, Normalizer, encode
+from dpc_mjx.adapter.networks import encoder_module
+from dpc_mjx.sac import LatentObsWrapper, SacConfig, act, make_trainer, policy_state, train
+from dpc_mjx.sac.warm_start import regress_actor
+
+_CONFIG = SacConfig(
+    num_timesteps=768,  # 3 epochs of 32 actor steps x 8 envs
+    num_envs=8,
+    batch_size=32,
+    grad_updates_per_step=2,
+    min_replay_size=128,
+    max_replay_size=2048,
+    epoch_steps=256,
+    eval_every=1,  # after every epoch (an epoch also runs after an evaluation)
+    eval_envs=2,
+)
+
+
+_WARM_START_R2 = 0.9  # held-out R^2 of every u component after the warm start
+_WARM_START_ATOL = 0.15  # action units (u / u_scale), a few held-out samples
+
+
+class _Killed(Exception):
+    pass
+
+
+@pytest.fixture(scope="module")
+def latent_env():
+    env = dpc_mjx.make("a1_arm/reaching", arm="regular")
+    config = AdapterConfig()
+    n_in = env.observation_size
+    params = encoder_module(config).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))
+    encoder = EncoderState(params=params, input_norm=Normalizer(jp.zeros(n_in), jp.ones(n_in)))
+    return env, LatentObsWrapper(env, config, encoder)
+
+
+def test_latent_env_shows_the_policy_body_state_and_z(latent_env):
+    env, wrapped = latent_env
+    assert wrapped.observation_size == 11 + 2
+    assert wrapped.action_size == 6
+    obs = jp.linspace(-1.0, 1.0, env.observation_size)
+    out = wrapped.latent_obs(obs)
+    np.testing.assert_array_equal(out[:11], obs[:11])
+    assert np.all(np.abs(np.asarray(out[11:])) < 1.0)
+    wrong = EncoderState(params={}, input_norm=Normalizer(jp.zeros(3), jp.ones(3)))
+    with pytest.raises(DpcError, match="encoder takes 3 inputs"):
+        LatentObsWrapper(env, AdapterConfig(), wrong)
+
+
+def test_sac_trains_resumes_after_a_kill_and_traces_the_env_once(latent_env, tmp_path):
+    _, wrapped = latent_env
+    counted = CountTraces(wrapped)
+    trainer = make_trainer(counted, _CONFIG)  # reused after the "kill": no second compile
+
+    def kill_after_two(row):
+        if row["epoch"] == 2:
+            raise _Killed
+
+    with pytest.raises(_Killed):
+        train(trainer, run_dir=tmp_path, progress=False, on_epoch=kill_after_two)
+    result = train(trainer, run_dir=tmp_path, resume=True, progress=False)
+    # one compile of the epoch served every epoch, before and after the kill; one of the
+    # deterministic evaluation
+    assert counted.traces == 2
+    rows = result.history
+    assert [r["epoch"] for r in rows] == [0, 1, 2, 3]  # 0: the starting policy, evaluated
+    assert [r["env_steps"] for r in rows] == [0, 256, 512, 768]
+    rows = rows[1:]
+    assert rows[0]["grad_steps"] > 0 and rows[2]["grad_steps"] > rows[1]["grad_steps"]
+    assert all(np.isfinite(r["critic_loss"]) for r in rows)
+    assert all(r["env_steps_per_s"] > 0 and r["grad_steps_per_s"] > 0 for r in rows)
+    for r in rows:
+        assert np.isfinite(r["eval_return"]) and 0.0 <= r["eval_fall_rate"] <= 1.0
+        assert np.isfinite(r["eval_mbc_return"])  # the same episodes with u = 0
+    log = (tmp_path / "sac_log.csv").read_text().splitlines()
+    assert len(log) == 1 + 4  # header + epoch 0 + one row per epoch, across the kill
+    obs = jp.zeros((4, wrapped.observation_size))
+    action = act(result.policy, obs)
+    assert action.shape == (4, 6) and np.all(np.abs(np.asarray(action)) <= 1.0)
+
+
+def test_resume_without_a_checkpoint_or_with_another_config_fails_clearly(latent_env, tmp_path):
+    _, wrapped = latent_env
+    with pytest.raises(DpcError, match="checkpoint"):
+        train(wrapped, _CONFIG, tmp_path / "empty", resume=True, progress=False)
+    with pytest.raises(DpcError, match="min_replay_size"):
+        SacConfig(num_timesteps=100, min_replay_size=200).validate()
+
+
+def test_actor_warm_start_regresses_the_oracle_u(latent_env):
+    """Synthetic samples whose u_oracle is a function of s_body: the regressed actor's mean
+    reproduces it on held-out samples, and its exploration scale is the one asked for."""
+    env, wrapped = latent_env
+    trainer = make_trainer(wrapped, _CONFIG)
+    carry = trainer.init(jax.random.PRNGKey(0))
+    rng = np.random.default_rng(0)
+    n, lay = 4096, env.obs_layout
+    obs = rng.normal(size=(n, env.observation_size)).astype(np.float32)
+    u_scale = np.asarray(env.config.u_scale, np.float32)
+    u = 0.5 * u_scale * np.tanh(obs[:, :6] - 0.5 * obs[:, 5:11])  # (n, 6) from s_body alone
+    data = Dataset(obs[:, lay.s_body], obs[:, lay.s_arm], obs[:, lay.p_arm], obs[:, :2], u_oracle=u)
+    carry, report = regress_actor(
+        trainer, carry, wrapped.adapter_config, wrapped.encoder, data, u_scale, epochs=60
+    )
+    assert report["samples"] == n and min(report["r2"]) > _WARM_START_R2, report
+    policy = policy_state(trainer, carry.training.policy_params, carry.training.normalizer)
+    held_out = obs[-8:]  # the last 10% are the regression's validation samples
+    z = encode(wrapped.adapter_config, wrapped.encoder, jp.asarray(held_out))
+    action = np.asarray(act(policy, jp.concatenate([jp.asarray(held_out[:, :11]), z], -1)))
+    np.testing.assert_allclose(action, u[-8:] / u_scale, atol=_WARM_START_ATOL)
+    with pytest.raises(DpcError, match="u_oracle"):
+        regress_actor(
+            trainer,
+            carry,
+            wrapped.adapter_config,
+            wrapped.encoder,
+            dataclasses.replace(data, u_oracle=None),
+            u_scale,
+        )
