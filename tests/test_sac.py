@@ -39,7 +39,7 @@ class _Killed(Exception):
 
 @pytest.fixture(scope="module")
 def latent_env():
-    env = dpc_mjx.make("a1_arm/reaching", arm="regular")
+    env = dpc_mjx.make("a1_arm/reaching", arm="regular", episode_length=100)  # short evaluations
     config = AdapterConfig()
     n_in = env.observation_size
     params = encoder_module(config).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))
