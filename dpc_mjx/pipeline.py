@@ -248,9 +248,7 @@ def train_policy(
     progress: bool = True,
 ) -> sac.TrainResult:
     """SAC on the latent-observation env of the run's arm."""
-    env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
-    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder)
-    sac_config = dataclasses.replace(config.sac, seed=config.seed)
+    latent_env, sac_config = _sac_setup(config, adapter)
     folder = run_dir / "sac"
     has_checkpoint = (folder / "checkpoint.json").exists()
     print(
@@ -260,7 +258,8 @@ def train_policy(
     )
     actor_init = None
     if config.actor_init == "oracle_regression":
-        actor_init = _oracle_regression(config, run_dir, adapter, env.config.u_scale)
+        u_scale = latent_env.unwrapped.config.u_scale
+        actor_init = _oracle_regression(config, run_dir, adapter, u_scale)
     result = sac.train(
         latent_env,
         sac_config,
@@ -272,6 +271,13 @@ def train_policy(
     if result.history:
         plots.training_curve(result.history, run_dir / "plots" / "training_curve.png")
     return result
+
+
+def _sac_setup(config: RunConfig, adapter: adapter_lib.Adapter):
+    """The run's latent-observation env (its arm, u from the policy) and its SAC config."""
+    env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
+    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder)
+    return latent_env, dataclasses.replace(config.sac, seed=config.seed)
 
 
 def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, u_scale):
@@ -323,21 +329,29 @@ def export(
 
 def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[CellResult]:
     """The evaluation protocol on the run's arm; writes `eval.md` and prints the table."""
-    artefacts = io.load(export_dir)
-    print(TABLE_HEADER, flush=True)
-    cells = evaluate(
+    return _evaluate_table(
         [config.arm],
         list(config.eval_controllers),
         task=config.task,
         episodes=config.eval_episodes,
         steps=config.eval_steps,
         seed=config.seed + 1000,  # other episodes than training's
-        dpc_policy_for=artefacts.dpc_policy,
+        dpc_policy_for=io.load(export_dir).dpc_policy,
         overrides=config.env_overrides,
-        on_result=lambda c: print(table_row(c), flush=True),
+        out=run_dir / "eval.md",
     )
-    text = "\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n"
-    (run_dir / "eval.md").write_text(text)
+
+
+def _evaluate_table(arms, controllers, *, out=None, **kwargs) -> list[CellResult]:
+    """`eval.evaluate`, printing the table row by row and writing it to `out` (markdown)."""
+    print(TABLE_HEADER, flush=True)
+
+    def show(cell: CellResult) -> None:
+        print(table_row(cell), flush=True)
+
+    cells = evaluate(arms, controllers, on_result=show, **kwargs)
+    if out is not None:
+        pathlib.Path(out).write_text("\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n")
     return cells
 
 
@@ -347,10 +361,7 @@ def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = Non
     run_dir = pathlib.Path(run_dir)
     config = read_run_config(run_dir)
     adapter = adapter_checkpoint.load(run_dir / "adapter")
-    env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
-    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder)
-    sac_config = dataclasses.replace(config.sac, seed=config.seed)
-    result = sac.restore_policy(latent_env, sac_config, run_dir / "sac")
+    result = sac.restore_policy(*_sac_setup(config, adapter), run_dir / "sac")
     return export(config, run_dir, adapter, result, out)
 
 
@@ -358,9 +369,7 @@ def env_overrides(artefacts: io.Artefacts) -> dict:
     """The env options an export was trained with (its sidecar's env_config), to evaluate and
     transfer under the same disturbances; the controller is chosen per use."""
     saved = artefacts.meta.get("env_config") or {}
-    return {
-        k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "controller"
-    }
+    return _tuples({k: v for k, v in saved.items() if k != "controller"})
 
 
 def transfer_arm(
@@ -414,8 +423,7 @@ def evaluate_export(
     trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
     # the training task's disturbances; another task brings its own
     overrides = env_overrides(artefacts) if task == trained_on else {}
-    print(TABLE_HEADER, flush=True)
-    cells = evaluate(
+    return _evaluate_table(
         arms,
         list(controllers),
         task=task,
@@ -424,8 +432,5 @@ def evaluate_export(
         seed=seed,
         dpc_policy_for=artefacts.dpc_policy,
         overrides=overrides,
-        on_result=lambda c: print(table_row(c), flush=True),
+        out=out,
     )
-    if out is not None:
-        pathlib.Path(out).write_text("\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n")
-    return cells

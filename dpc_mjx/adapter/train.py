@@ -13,14 +13,11 @@ the old decoder (and so the old policy) reads the same way.
 
 from __future__ import annotations
 
-import time
-
 import jax
 import jax.numpy as jp
-import numpy as np
-import optax
 from flax import struct
 
+from dpc_mjx import fitting
 from dpc_mjx.adapter import losses
 from dpc_mjx.adapter.data import Dataset, collect
 from dpc_mjx.adapter.networks import (
@@ -34,7 +31,6 @@ from dpc_mjx.adapter.networks import (
 )
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.errors import DpcError
-from dpc_mjx.progress import bar
 from dpc_mjx.serialization import check_tree
 
 
@@ -191,56 +187,30 @@ def _nll(config, enc_params, dec_params, batch) -> jax.Array:
 
 
 def _fit(config, loss, params, enc_norm, dec, tr: Dataset, va: Dataset, key, progress):
-    """Adam on `loss` over epochs of shuffled minibatches; returns the best-validation params and
-    the history {'train_nll', 'val_nll': per epoch, 'constant_val_nll', 'best_epoch', 'epochs',
-    'seconds'}."""
+    """Adam on `loss` over epochs of shuffled minibatches (`fitting.fit`); returns the
+    best-validation params and the history {'train_nll', 'val_nll': per epoch,
+    'constant_val_nll', 'best_epoch', 'epochs', 'seconds'}."""
     train_b, val_b = _standardise(tr, enc_norm, dec), _standardise(va, enc_norm, dec)
-    n, bs = len(tr), min(config.batch_size, len(tr))
-    n_batches = n // bs
-    opt = optax.adam(config.learning_rate)
-
-    @jax.jit
-    def epoch(params, opt_state, key):
-        order = jax.random.permutation(key, n)[: n_batches * bs].reshape(n_batches, bs)
-
-        def step(carry, rows):
-            p, s = carry
-            batch = jax.tree.map(lambda a: a[rows], train_b)
-            value, grads = jax.value_and_grad(loss)(p, batch)
-            updates, s = opt.update(grads, s, p)
-            return (optax.apply_updates(p, updates), s), value
-
-        (params, opt_state), values = jax.lax.scan(step, (params, opt_state), order)
-        return params, opt_state, jp.mean(values), loss(params, val_b)
-
-    opt_state = opt.init(params)
+    best, fitted = fitting.fit(
+        loss,
+        params,
+        train_b,
+        val_b,
+        learning_rate=config.learning_rate,
+        batch_size=config.batch_size,
+        epochs=config.epochs,
+        patience=config.patience,
+        key=key,
+        diverged_hint="lower AdapterConfig.learning_rate or check the data for NaN.",
+        progress=progress,
+        desc="adapter",
+    )
     history = {
-        "train_nll": [],
-        "val_nll": [],
+        "train_nll": fitted["train_loss"],
+        "val_nll": fitted["val_loss"],
         "constant_val_nll": float(losses.constant_nll(val_b[2])),
     }
-    best, best_val, best_epoch = params, np.inf, -1
-    t0 = time.perf_counter()
-    with bar(config.epochs, "adapter", "epoch", progress) as pbar:
-        for i in range(config.epochs):
-            key, k = jax.random.split(key)
-            params, opt_state, tr_loss, va_loss = epoch(params, opt_state, k)
-            tr_loss, va_loss = float(tr_loss), float(va_loss)
-            if not (np.isfinite(tr_loss) and np.isfinite(va_loss)):
-                raise DpcError(
-                    f"Adapter training diverged at epoch {i} (train NLL {tr_loss}, validation "
-                    f"{va_loss}); lower AdapterConfig.learning_rate or check the data for NaN."
-                )
-            history["train_nll"].append(tr_loss)
-            history["val_nll"].append(va_loss)
-            if va_loss < best_val:
-                best, best_val, best_epoch = params, va_loss, i
-            pbar.set_postfix(train=f"{tr_loss:.3f}", val=f"{va_loss:.3f}")
-            pbar.update(1)
-            if i - best_epoch >= config.patience:
-                break
-    history.update(best_epoch=best_epoch, epochs=len(history["val_nll"]))
-    history["seconds"] = time.perf_counter() - t0
+    history.update({k: fitted[k] for k in ("best_epoch", "epochs", "seconds")})
     return best, history
 
 

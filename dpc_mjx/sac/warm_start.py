@@ -12,10 +12,10 @@ learn its value first).
 Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) (MSE), and its
 exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
 samples (`Dataset.u_oracle`, collected with MBC); the observation statistics start from the same
-samples. The last `val_fraction` of the samples are held out: the epoch with the lowest held-out
-loss is kept (at most `epochs`, stopping after `patience` without improvement), so components of
-u that the observation does not predict stay near their mean instead of fitting noise, and the
-report gives the held-out R^2 per component.
+samples. The last `val_fraction` of the samples are held out (`Dataset.split`): the epoch with
+the lowest held-out loss is kept (`fitting.fit`: at most `epochs`, stopping after `patience`
+without improvement), so components of u that the observation does not predict stay near their
+mean instead of fitting noise, and the report gives the held-out R^2 per component.
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from __future__ import annotations
 import jax
 import jax.numpy as jp
 import numpy as np
-import optax
 from brax.training.acme import running_statistics
 
+from dpc_mjx import fitting
 from dpc_mjx.adapter.data import Dataset
 from dpc_mjx.adapter.networks import AdapterConfig, EncoderState, encode
 from dpc_mjx.errors import DpcError
@@ -54,67 +54,54 @@ def regress_actor(
     a report {'r2': per u component on held-out samples, 'val_mse', 'samples'}."""
     if data.u_oracle is None:
         raise DpcError("The dataset has no u_oracle column; collect it with adapter.collect.")
-    x = np.asarray(
-        jp.concatenate(
-            [jp.asarray(data.s_body), encode(adapter_config, encoder, data.encoder_input)], -1
-        )
-    )  # (N, 11 + latent) the policy's observation [s_body, z]
-    if x.shape[1] != trainer.observation_size:
+    if data.s_body.shape[1] + adapter_config.latent_size != trainer.observation_size:
         raise DpcError(
-            f"The policy observes {trainer.observation_size} values, [s_body, z] has {x.shape[1]}."
+            f"The policy observes {trainer.observation_size} values, [s_body, z] has "
+            f"{data.s_body.shape[1] + adapter_config.latent_size}."
         )
-    y = np.clip(data.u_oracle / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)  # (N, 6)
-    n_val = max(1, round(len(x) * val_fraction))
-    x_tr, y_tr, x_va, y_va = x[:-n_val], y[:-n_val], x[-n_val:], y[-n_val:]
-    normalizer = running_statistics.update(carry.training.normalizer, jp.asarray(x_tr))
+    u_scale = np.asarray(u_scale, np.float32)
+
+    def arrays(part: Dataset) -> tuple[jax.Array, jax.Array]:
+        """(obs (N, 11 + latent) the policy's [s_body, z], target (N, 6) in action units)."""
+        z = encode(adapter_config, encoder, part.encoder_input)
+        obs = jp.concatenate([jp.asarray(part.s_body), z], -1)
+        return obs, jp.asarray(np.clip(part.u_oracle / u_scale, -U_CLIP, U_CLIP))
+
+    train, val = (arrays(part) for part in data.split(val_fraction))
+    normalizer = running_statistics.update(carry.training.normalizer, train[0])
     policy = trainer.networks.policy_network
-    action_size = trainer.action_size
 
     def predict(params, obs):
         loc, scale = jp.split(policy.apply(normalizer, params, obs), 2, axis=-1)
         return jp.tanh(loc), jax.nn.softplus(scale) + 1e-3
 
-    def loss(params, obs, target):
+    def loss(params, batch):
+        obs, target = batch
         mean, std = predict(params, obs)
         return jp.mean((mean - target) ** 2) + jp.mean((std - init_std) ** 2)
 
-    opt = optax.adam(learning_rate)
-    n, bs = len(x_tr), min(batch_size, len(x_tr))
-    xs, ys = jp.asarray(x_tr), jp.asarray(y_tr)
-
-    @jax.jit
-    def epoch(params, state, key):
-        order = jax.random.permutation(key, n)[: (n // bs) * bs].reshape(-1, bs)
-
-        def step(carry, rows):
-            p, s = carry
-            grads = jax.grad(loss)(p, xs[rows], ys[rows])
-            updates, s = opt.update(grads, s, p)
-            return (optax.apply_updates(p, updates), s), None
-
-        return jax.lax.scan(step, (params, state), order)[0]
-
-    val_loss = jax.jit(lambda p: loss(p, jp.asarray(x_va), jp.asarray(y_va)))
-    params = best = carry.training.policy_params
-    state, best_val, best_epoch = opt.init(params), float(val_loss(params)), 0
-    key = jax.random.PRNGKey(seed)
-    for i in range(1, epochs + 1):  # early stopping: the best validation epoch is kept
-        key, k = jax.random.split(key)
-        params, state = epoch(params, state, k)
-        value = float(val_loss(params))
-        if value < best_val:
-            best, best_val, best_epoch = params, value, i
-        elif i - best_epoch >= patience:
-            break
-    params = best
-    pred = np.asarray(predict(params, jp.asarray(x_va))[0])
+    params, history = fitting.fit(
+        loss,
+        carry.training.policy_params,
+        train,
+        val,
+        learning_rate=learning_rate,
+        batch_size=batch_size,
+        epochs=epochs,
+        patience=patience,
+        key=jax.random.PRNGKey(seed),
+        diverged_hint="lower the learning_rate of regress_actor or check the data for NaN.",
+        desc="actor regression",
+    )
+    pred = np.asarray(predict(params, val[0])[0])
+    y_va = np.asarray(val[1])
     resid = ((pred - y_va) ** 2).sum(0)
     spread = np.maximum(((y_va - y_va.mean(0)) ** 2).sum(0), 1e-12)
     report = {
-        "samples": len(x),
-        "best_epoch": best_epoch,
+        "samples": len(data),
+        "best_epoch": history["best_epoch"] + 1,  # epochs trained
         "val_mse": float(np.mean((pred - y_va) ** 2)),
-        "r2": [float(v) for v in 1.0 - resid / spread][:action_size],
+        "r2": [float(v) for v in 1.0 - resid / spread][: trainer.action_size],
     }
     training = carry.training.replace(
         policy_params=params,
