@@ -27,7 +27,7 @@ instead of reductions), so every op is elementwise over the batch. A single call
 batch axis. Under `jax.vmap`, a batching rule (`jax.custom_batching.custom_vmap`) moves the batch
 to the last, contiguous axis and runs the same code on chunks of `_CHUNK` = 64 problems, one
 after the other (`lax.map`): each XLA:CPU loop is then a SIMD loop over 64 problems, and a chunk's
-data (~10 KB per problem) stay in the L2 cache. Arguments the vmap does not batch are broadcast;
+data (~10 KB per problem) stay in the L2 cache. On a GPU the whole batch is one chunk. Arguments the vmap does not batch are broadcast;
 nested vmaps are merged into one batch. `_pin` marks the values that XLA:CPU would otherwise
 recompute inside every consumer. `_solve_reference` is the same code vmapped the default way
 (the batch on the leading axis), for the benchmark. custom_vmap has no reverse-mode autodiff;
@@ -54,7 +54,7 @@ from dpc_mjx.errors import DpcError
 _TINY = 1e-30  # keeps divisions finite (fits float32)
 _BIG = 1e30  # clamp of z/s (fits float32)
 _NORM_MIN = 1e-12  # a zero row or column is left unscaled by the equilibration
-_CHUNK = 64  # problems per chunk of the batched kernel (docs/decisions.md)
+_CHUNK = 64  # problems per chunk of the batched kernel on CPU (docs/decisions.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -517,7 +517,9 @@ def _run_kernel(args: tuple, cfg: QPSettings) -> QPResult:
 def _solve_many(args: tuple, cfg: QPSettings) -> QPResult:
     """args with a leading batch axis B: the kernel on chunks of _CHUNK problems, batch minor."""
     size = args[0].shape[0]
-    chunk = min(_CHUNK, size)
+    # XLA:CPU: chunks that stay in cache, one after the other. An accelerator runs the whole
+    # batch at once (the batch-minor layout is also what its memory coalescing wants).
+    chunk = min(_CHUNK, size) if jax.default_backend() == "cpu" else size
     n_chunks = -(-size // chunk)
     pad = n_chunks * chunk - size
     if pad:  # repeat the last problem to fill the last chunk
