@@ -126,12 +126,18 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="batches 1 and 16 only, regular only")
     parser.add_argument("--sweep", action="store_true", help="also sweep MJX solver options")
+    parser.add_argument(
+        "--batches", type=int, nargs="+", help="MJX batches (default 1 16 128 1024)"
+    )
+    parser.add_argument("--variants", nargs="+", help="default: none regular double")
     args = parser.parse_args()
     print(f"jax {jax.__version__}, mujoco {mujoco.__version__}, devices {jax.devices()}")
     if args.quick:
-        physics_table(["regular"], [1, 16], calls=4)
+        physics_table(args.variants or ["regular"], args.batches or [1, 16], calls=4)
     else:
-        physics_table(["none", "regular", "double"], [1, 16, 128, 1024], calls=6)
+        physics_table(
+            args.variants or ["none", "regular", "double"], args.batches or [1, 16, 128, 1024], 6
+        )
     if args.sweep:
         sweep_table(128, calls=6)
 
