@@ -6,13 +6,16 @@ apart, median wall time of several calls (block_until_ready). Accuracy: relative
 |J - J*| / max(1, |J*|) and constraint violation max(Gx - h, 0) / max(1, |h|_inf) against OSQP in
 float64 with eps 1e-9 and polishing, on the first problems of the batch.
 
-Rows "ours" run `jax.vmap(qp.solve)` (the batch-minor kernel); the "default vmap layout" row runs
-the same code vmapped the default way (`qp._solve_reference`); `--previous` adds a row for another
-version of qp.py, e.g. `git show <rev>:dpc_mjx/control/qp.py > /tmp/qp_prev.py`.
+Rows "ours" run `jax.vmap(qp.solve)` (the batch-minor kernel) with a dense G; "ours, G pattern"
+passes `g_pattern=balance.G_PATTERN`, as the controller does (40 of G's 288 entries can be
+nonzero); the "default vmap layout" row runs the same code vmapped the default way
+(`qp._solve_reference`); `--previous` adds a row for another version of qp.py, e.g.
+`git show <rev>:dpc_mjx/control/qp.py > /tmp/qp_prev.py`. `--one-core` pins the process (JAX's
+threads included) to one CPU core, so that ours and OSQP each get one core.
 
-    .venv/bin/python experiments/bench_qp.py           # full (~2-3 min on 2 cores)
+    .venv/bin/python experiments/bench_qp.py           # full (~3 min on 2 cores)
     .venv/bin/python experiments/bench_qp.py --quick   # smoke run (~40 s)
-    .venv/bin/python experiments/bench_qp.py --previous /tmp/qp_prev.py
+    .venv/bin/python experiments/bench_qp.py --one-core --previous /tmp/qp_prev.py
 """
 
 from __future__ import annotations
@@ -24,6 +27,9 @@ import os
 import sys
 import time
 from collections.abc import Callable
+
+if "--one-core" in sys.argv:  # before JAX (and its thread pool) starts; see main()
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
 
 import jax
 import jax.numpy as jp
@@ -137,6 +143,7 @@ def boxosqp_fn():
 
 QPAX, BOX = "qpax (30 it, tol 1e-5)", "jaxopt BoxOSQP (tol 1e-3)"
 OURS, OURS8 = "ours (qp.solve, 10 it)", "ours, 8 it"
+SPARSE = "ours, G pattern (g_pattern=balance.G_PATTERN, 10 it)"
 REF = "ours, default vmap layout (qp._solve_reference)"  # same code, batch on the leading axis
 PREV = "previous qp.py (--previous)"
 
@@ -202,7 +209,8 @@ def print_tables(bench: Bench) -> None:
     rows, acc, per_batch, osqp_us = bench.rows, bench.acc, bench.per_batch, bench.osqp_us
     print(
         f"\nBalance QPs (n=12, m=24), float32 JAX on {jax.devices()[0].device_kind}, "
-        f"{os.cpu_count()} CPU threads, load avg {os.getloadavg()[0]:.1f}\n"
+        f"{len(os.sched_getaffinity(0))} of {os.cpu_count()} CPU threads, "
+        f"load avg {os.getloadavg()[0]:.1f}\n"
     )
     print("| solver | batch | compile (s) | us/problem | solves/s | OSQP-py (setup+solve) / this |")
     print("|---|---:|---:|---:|---:|---:|")
@@ -213,18 +221,21 @@ def print_tables(bench: Bench) -> None:
         c = "-" if compile_s is None else f"{compile_s:.1f}"
         print(f"| {name} | {b} | {c} | {us:.2f} | {1e6 / us:,.0f} | {osqp_us / us:.1f}x |")
 
+    others = (REF, PREV, QPAX, BOX)
     print(
-        "\n| speed-up of ours (10 it) at batch | vs default vmap layout | vs previous qp.py "
-        "| vs qpax | vs BoxOSQP |"
+        "\n| speed-up at batch | of | vs OSQP-py (setup+solve) | vs default vmap layout "
+        "| vs previous qp.py | vs qpax | vs BoxOSQP |"
     )
-    print("|---:|---:|---:|---:|---:|")
-    for b in sorted({b for (name, b) in per_batch if name == OURS}):
-        ours = per_batch[OURS, b]
-        cells = [
-            f"{per_batch[o, b] / ours:.1f}x" if (o, b) in per_batch else "-"
-            for o in (REF, PREV, QPAX, BOX)
-        ]
-        print(f"| {b} | {' | '.join(cells)} |")
+    print("|---:|---|---:|---:|---:|---:|---:|")
+    for b in sorted({b for (name, b) in per_batch if name in (OURS, SPARSE)}):
+        for mine, label in ((OURS, "ours, dense G"), (SPARSE, "ours, G pattern")):
+            if (mine, b) not in per_batch:
+                continue
+            ours = per_batch[mine, b]
+            cells = [f"{osqp_us / ours:.1f}x"] + [
+                f"{per_batch[o, b] / ours:.1f}x" if (o, b) in per_batch else "-" for o in others
+            ]
+            print(f"| {b} | {label} | {' | '.join(cells)} |")
 
     print("\nAccuracy vs OSQP float64 (eps 1e-9, polished) on the first n problems of the batch\n")
     print("| solver | n | gap median | gap max | max violation |")
@@ -240,6 +251,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="small batches, few repeats")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--previous", help="path of another qp.py to benchmark as one more row")
+    parser.add_argument("--one-core", action="store_true", help="pin the process to one core")
     args = parser.parse_args()
 
     ours_batches = (1, 256, 1024) if args.quick else (1, 256, 1024, 4096)
@@ -256,6 +268,7 @@ def main() -> None:
     run_osqp(bench, n_osqp)
     solvers = {
         OURS: (qp.solve, ours_batches),
+        SPARSE: (lambda *a: qp.solve(*a, g_pattern=balance.G_PATTERN), ours_batches),
         OURS8: (lambda *a: qp.solve(*a, settings=qp.QPSettings(iterations=8)), ours_batches[-1:]),
         REF: (qp._solve_reference, base_batches),
         **({PREV: (load_solve(args.previous), base_batches)} if args.previous else {}),

@@ -17,12 +17,13 @@ WEIGHT = MASS * balance.GRAVITY  # N
 
 # Tolerances of the physics checks (N, N·m), against the rigid-body statics.
 _SUM_FORCE_TOL = 2e-3 * WEIGHT  # on the summed force, about the expected support below
-_FOOT_SPREAD_TOL = 1e-2  # max |f_z,i / mean f_z - 1| with the COM centred
+_FOOT_SPREAD_TOL = 1e-2  # |front / back - 1| and |left / right - 1| of f_z, the COM centred
 _SHIFT_TOL = 0.02  # relative error of the force / moment shift by -f_a / -tau_a
 _SHIFT_ABS_TOL = 0.3  # N or N·m, added to the relative one
 # Internal forces (the 6-D null space of M: feet pushing against each other) are set only by R,
 # whose curvature is ~1e-7 of P's largest eigenvalue: float32 resolves them to ~1 N (OSQP in
-# float64 on the same float32 P gives exactly 0 horizontal force when standing).
+# float64 on the same float32 P gives exactly 0 horizontal force when standing). The same holds for
+# the vertical null-space mode, the diagonal pairs FR+RL against FL+RR.
 _INTERNAL_FORCE_TOL = 0.05 * WEIGHT / 4  # N, ~5 % of a foot's load
 
 _build_batch = jax.jit(jax.vmap(lambda s: balance.build_balance_qp(PARAMS, **s)))
@@ -70,9 +71,14 @@ def balance_problems():
     return states, prob, j_star
 
 
-def test_balance_qps_match_osqp(balance_problems):
+_solve_batch_pattern = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=balance.G_PATTERN)))
+
+
+@pytest.mark.parametrize("sparse", [False, True], ids=["dense", "G_PATTERN"])
+def test_balance_qps_match_osqp(balance_problems, sparse):
+    """Dense, and with the pattern of G the controller passes (balance.G_PATTERN)."""
     states, prob, j_star = balance_problems
-    res = _solve_batch(prob.P, prob.q, prob.G, prob.h)
+    res = (_solve_batch_pattern if sparse else _solve_batch)(prob.P, prob.q, prob.G, prob.h)
     check_against_reference(res, (prob.P, prob.q, prob.G, prob.h), j_star)
     # swing feet: the optimum is exactly 0; the float32 solve leaves them tiny
     swing = ~np.asarray(states["contact"])
@@ -101,6 +107,9 @@ def test_problem_shapes_and_structure(balance_problems):
         + np.asarray(prob.const)
     )
     assert np.allclose(ours, 0.5 * paper, rtol=1e-4)
+    # G is zero outside balance.G_PATTERN, which the controller passes to qp.solve
+    assert np.all(np.asarray(prob.G)[:, ~balance.G_PATTERN] == 0.0)
+    assert balance.G_PATTERN.sum() == 40
     # swing feet have zero columns in M
     swing_cols = np.repeat(~np.asarray(states["contact"]), 3, axis=1)
     assert np.all(np.asarray(prob.M).transpose(0, 2, 1)[swing_cols] == 0.0)
@@ -130,8 +139,10 @@ def test_standing_forces_balance_gravity():
     assert bool(res.valid) and bool(res.converged)
     total = forces.sum(0)
     assert np.allclose(total, [0.0, 0.0, expected_support(4)], atol=_SUM_FORCE_TOL), total
-    fz = forces[:, 2]
-    assert np.abs(fz / fz.mean() - 1.0).max() <= _FOOT_SPREAD_TOL, fz
+    fr, fl, rr, rl = forces[:, 2]  # f_z, the feet in the order FR, FL, RR, RL
+    assert abs((fr + fl) / (rr + rl) - 1.0) <= _FOOT_SPREAD_TOL, forces  # pitch balance
+    assert abs((fl + rl) / (fr + rr) - 1.0) <= _FOOT_SPREAD_TOL, forces  # roll balance
+    assert abs(fr + rl - fl - rr) / 2.0 <= _INTERNAL_FORCE_TOL, forces  # the null-space mode
     assert np.abs(forces[:, :2]).max() <= _INTERNAL_FORCE_TOL, forces
 
 

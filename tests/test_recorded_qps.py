@@ -9,7 +9,7 @@ import scipy.sparse as sp
 from mujoco import mjx
 
 from dpc_mjx import sim
-from dpc_mjx.control import gait, qp
+from dpc_mjx.control import balance, gait, qp
 from dpc_mjx.control.closed_loop import init_loop
 from dpc_mjx.control.controller import make_controller
 from dpc_mjx.robots import build
@@ -72,9 +72,11 @@ def _osqp(P, q, G, h):
 
 
 def test_solver_matches_osqp_on_recorded_controller_qps(recorded):
+    """Solved as the controller solves them (with balance.G_PATTERN), cold."""
     P, q, G, h = recorded
     assert P.shape[0] == _BATCH * _TICKS
-    res = jax.jit(jax.vmap(qp.solve))(*(jp.asarray(x) for x in recorded))
+    solve = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=balance.G_PATTERN)))
+    res = solve(*(jp.asarray(x) for x in recorded))
     x = np.asarray(res.x, np.float64)
     gaps, viols = [], []
     for i in range(P.shape[0]):

@@ -219,6 +219,15 @@ def friction_constraints(
     return G, h.reshape(N_ROWS)
 
 
+def _g_pattern() -> np.ndarray:
+    """(24, 12) bool: the entries of friction_constraints' G that can be nonzero."""
+    rows = np.array([[0, 0, 1], [0, 0, 1], [1, 0, 1], [1, 0, 1], [0, 1, 1], [0, 1, 1]], bool)
+    return np.kron(np.eye(N_FEET, dtype=bool), rows)
+
+
+G_PATTERN = _g_pattern()  # for qp.solve(..., g_pattern=G_PATTERN): 40 of G's 288 entries
+
+
 def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts, disturbance)
     params: BalanceParams,
     com_pos: jax.Array,
@@ -306,7 +315,15 @@ def solve_balance(  # noqa: PLR0913, PLR0917 (build_balance_qp's arguments, solv
         f_a,
         tau_a,
     )
-    res = qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=warm_start, settings=settings)
+    res = qp.solve(
+        prob.P,
+        prob.q,
+        prob.G,
+        prob.h,
+        warm_start=warm_start,
+        settings=settings,
+        g_pattern=G_PATTERN,
+    )
     forces = res.x.reshape(N_FEET, 3) * contact.astype(res.x.dtype)[:, None]
     return forces, res
 

@@ -153,7 +153,9 @@ class LowLevelController:
         p = self.plan(cs, d, command)
         s, stance, progress, vel_des = p.state, p.stance, p.progress, p.vel_des
         prob = self.balance_qp(p, u)
-        res = qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp)
+        res = qp.solve(
+            prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
+        )
         forces = res.x.reshape(4, 3) * stance[:, None]  # N, world, swing feet exactly 0
 
         # Swing feet: record lift-off, track a trajectory to the Raibert foothold.

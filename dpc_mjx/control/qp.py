@@ -1,4 +1,4 @@
-"""A small dense QP solver in JAX: fixed-iteration primal-dual interior point (Mehrotra).
+"""A small QP solver in JAX: fixed-iteration primal-dual interior point (Mehrotra).
 
 Solves, for one problem (vmap it for a batch)::
 
@@ -25,18 +25,24 @@ P (n, n, ...), q (n, ...), G (m, n, ...), a per-problem scalar (...). Along the 
 axes it uses static slices only (unrolled matvecs, Cholesky and substitutions, pairwise folds
 instead of reductions), so every op is elementwise over the batch. A single call runs it with no
 batch axis. Under `jax.vmap`, a batching rule (`jax.custom_batching.custom_vmap`) moves the batch
-to the last, contiguous axis and runs the same code on chunks of `_CHUNK` = 64 problems, one
-after the other (`lax.map`): each XLA:CPU loop is then a SIMD loop over 64 problems, and a chunk's
-data (~10 KB per problem) stay in the L2 cache. On a GPU the whole batch is one chunk. Arguments the vmap does not batch are broadcast;
-nested vmaps are merged into one batch. `_pin` marks the values that XLA:CPU would otherwise
+to the last, contiguous axis and runs the same code on chunks of `_CHUNK` = 64 problems (128 with
+a G pattern), one after the other (`lax.map`): each XLA:CPU loop is then a SIMD loop over the
+chunk, and a chunk's data (~10 KB per problem dense) stay in the L2 cache. On a GPU the whole
+batch is one chunk. Arguments the vmap does not batch are broadcast; nested vmaps are merged
+into one batch. `_pin` marks the values that XLA:CPU would otherwise
 recompute inside every consumer. `_solve_reference` is the same code vmapped the default way
 (the batch on the leading axis), for the benchmark. custom_vmap has no reverse-mode autodiff;
 nothing differentiates through the solver.
 
+Sparsity. `g_pattern` (static, (m, n) bool) says which entries of G can be nonzero; the kernel
+then stores and multiplies only those (index tables in `_Structure`): G x, G'y and the products
+G_ri G_rj of H. P and the Cholesky factor stay dense.
+
 Cost per iteration (n = 12, m = 24): H from the stored row products G_ri G_rj (m n(n+1)/2 = 1872
-multiply-adds), the Cholesky (~n^3/6), two pairs of triangular solves, six matvecs with P, G or
-G'. In the batched kernel that is ~11k float ops per problem and iteration, ~0.35 us at batch
-4096 on one core (docs/benchmarks.md).
+multiply-adds dense, 56 for the balance QP's pattern), the Cholesky (~n^3/6), two pairs of
+triangular solves, six matvecs with P, G or G'. Dense, that is ~11k float ops per problem and
+iteration, ~0.35 us at batch 4096 on one core; with the balance pattern ~0.25 us, of which about
+half is XLA:CPU's fixed cost per op (docs/benchmarks.md, docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -54,7 +60,11 @@ from dpc_mjx.errors import DpcError
 _TINY = 1e-30  # keeps divisions finite (fits float32)
 _BIG = 1e30  # clamp of z/s (fits float32)
 _NORM_MIN = 1e-12  # a zero row or column is left unscaled by the equilibration
-_CHUNK = 64  # problems per chunk of the batched kernel on CPU (docs/decisions.md)
+# Problems per chunk of the batched kernel on CPU (docs/decisions.md): a chunk's data stay in the
+# L2 cache, and each of the ~150 ops of an iteration costs ~50 ns of dispatch whatever its size,
+# so the chunk is as large as the cache allows: 64 for a dense G, 128 with a sparse pattern
+# (its tables are ~10x smaller).
+_CHUNK, _CHUNK_SPARSE = 64, 128
 
 
 @dataclasses.dataclass(frozen=True)
@@ -195,12 +205,84 @@ def _mv(A: jax.Array, x: jax.Array) -> jax.Array:
     return out
 
 
-def _mtv(A: jax.Array, y: jax.Array) -> jax.Array:
-    """A' y for A (m, n, ...), y (m, ...) -> (n, ...), unrolled over m."""
-    out = A[0] * y[0]
-    for i in range(1, A.shape[0]):
-        out = out + A[i] * y[i]
-    return out
+def _take(x: jax.Array, idx: np.ndarray) -> jax.Array:
+    """x[idx] along the leading axis for a static index vector idx (k,): a broadcast when all
+    indices are equal, a slice when they are consecutive, else a gather."""
+    if (idx == idx[0]).all():
+        return jp.broadcast_to(x[int(idx[0])], (len(idx),) + x.shape[1:])
+    if (np.diff(idx) == 1).all():
+        return x[int(idx[0]) : int(idx[0]) + len(idx)]
+    return x[idx]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Structure:
+    """The static nonzero pattern of G (m, n), or None for a dense G, with the index tables of
+    the products the kernel forms from G's entries only (numpy, built once per pattern).
+
+    Entries are addressed in G flattened row-major (r n + j); index m n is an appended zero,
+    which pads the tables to rectangles.
+    """
+
+    m: int
+    n: int
+    pattern: tuple[tuple[bool, ...], ...] | None
+
+    @functools.cached_property
+    def mask(self) -> np.ndarray:  # (m, n) bool
+        if self.pattern is None:
+            return np.ones((self.m, self.n), bool)
+        return np.array(self.pattern, bool)
+
+    def _padded(self, lists: list[list[int]]) -> np.ndarray:
+        """Rows of flat entry indices padded with the zero entry to one width (>= 1)."""
+        width = max(1, *(len(x) for x in lists))
+        zero = self.m * self.n
+        return np.array([x + [zero] * (width - len(x)) for x in lists], np.int64)
+
+    @functools.cached_property
+    def rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """(m, K) flat entries of each row and (m, K) their columns (G x = sum_k of products)."""
+        lists = [[r * self.n + j for j in np.flatnonzero(self.mask[r])] for r in range(self.m)]
+        flat = self._padded(lists)
+        return flat, flat % self.n * (flat < self.m * self.n)
+
+    @functools.cached_property
+    def cols(self) -> tuple[np.ndarray, np.ndarray]:
+        """(n, L) flat entries of each column and (n, L) their rows (G'y = sum_l of products)."""
+        lists = [[r * self.n + j for r in np.flatnonzero(self.mask[:, j])] for j in range(self.n)]
+        flat = self._padded(lists)
+        return flat, flat // self.n * (flat < self.m * self.n)
+
+    @functools.cached_property
+    def normal(self) -> list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray] | None]:
+        """Per column j of H = G' diag(w) G: None if G' W G adds nothing to H[j:, j], else
+        (lo, hi, a, b, r): entries j + lo .. j + hi - 1 get sum_t G[a_t] G[b_t] w[r_t], where
+        a, b, r are (T, hi - lo) flat entries (padded with the zero entry) and rows."""
+        out = []
+        zero = self.m * self.n
+        for j in range(self.n):
+            terms = [np.flatnonzero(self.mask[:, i] & self.mask[:, j]) for i in range(j, self.n)]
+            hit = [k for k, t in enumerate(terms) if len(t)]
+            if not hit:
+                out.append(None)
+                continue
+            lo, hi = hit[0], hit[-1] + 1
+            width = max(len(terms[k]) for k in hit)
+            a = np.full((width, hi - lo), zero, np.int64)
+            b, r = a.copy(), np.zeros((width, hi - lo), np.int64)
+            for k in range(lo, hi):
+                t = terms[k]
+                a[: len(t), k - lo] = t * self.n + j + k
+                b[: len(t), k - lo] = t * self.n + j
+                r[: len(t), k - lo] = t
+            out.append((lo, hi, a, b, r))
+        return out
+
+
+@functools.lru_cache(maxsize=None)
+def _structure(m: int, n: int, pattern: tuple[tuple[bool, ...], ...] | None) -> _Structure:
+    return _Structure(m, n, pattern)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -241,7 +323,10 @@ def _cholesky(columns: list[jax.Array], floor: float) -> list[tuple[jax.Array, j
 
     Returns the columns of L as (L_jj (...), L[j+1:, j] (n-j-1, ...)). A pivot below
     floor * H_jj is raised to it, so the factor always exists (a regularised factor of a
-    near-singular H). Only the lower triangle is read.
+    near-singular H). Only the lower triangle is read. The divides here and in _cho_solve
+    also pin (see _pin) each entry of the factor and the solution: with reciprocals and
+    multiplies instead, XLA:CPU recomputes the chains of updates in every consumer (measured
+    18x slower).
     """
     n = len(columns)
     h_diag = [c[0] for c in columns]
@@ -290,7 +375,7 @@ class _Scaled(NamedTuple):
     h: jax.Array  # (m, ...) sanitised original h
     Ps: jax.Array  # (n, n, ...) c D P D
     qs: jax.Array  # (n, ...) c D q
-    Gs: jax.Array  # (m, n, ...) E G D
+    Gs: jax.Array  # (m, n, ...) E G D (0 outside the pattern)
     hs: jax.Array  # (m, ...) E h
     d: jax.Array  # (n, ...) variable scaling D
     e: jax.Array  # (m, ...) row scaling E
@@ -303,14 +388,63 @@ class _Scaled(NamedTuple):
     finite: jax.Array  # (...) bool, the input was finite
     one: jax.Array  # (...) ones, for _pin
     p_cols: list  # columns Ps[j:, j] (n - j, ...), the diagonal entry times (1 + reg)
-    gg_cols: list  # row products Gs_rj Gs_ri, i >= j (m, n - j, ...), the diagonal times (1 + reg)
+    g_rows: jax.Array  # (m, K, ...) the entries of each row of Gs (st.rows), for Gs x
+    g_cols: jax.Array  # (n, L, ...) the entries of each column of Gs (st.cols), for Gs'y
+    gg_cols: list  # per column j of H: None or the products Gs_ri Gs_rj (T, hi - lo, ...) of
+    #   st.normal[j], the diagonal entry times (1 + reg)
+    st: _Structure  # static: the pattern of G and its index tables
 
 
-def _prepare(P, q, G, h, cfg: QPSettings) -> _Scaled:
-    """Sanitise (a non-finite problem becomes min 1/2|x|^2 s.t. 0 <= 1, flagged) and scale."""
+def _g_mv(pr: _Scaled, x: jax.Array) -> jax.Array:
+    """Gs x (m, ...) for x (n, ...), from the entries of the pattern only."""
+    cols = pr.st.rows[1]
+    out = pr.g_rows[:, 0] * _take(x, cols[:, 0])
+    for k in range(1, cols.shape[1]):
+        out = out + pr.g_rows[:, k] * _take(x, cols[:, k])
+    return out
+
+
+def _g_mtv(pr: _Scaled, y: jax.Array) -> jax.Array:
+    """Gs'y (n, ...) for y (m, ...), from the entries of the pattern only."""
+    rows = pr.st.cols[1]
+    out = pr.g_cols[:, 0] * _take(y, rows[:, 0])
+    for k in range(1, rows.shape[1]):
+        out = out + pr.g_cols[:, k] * _take(y, rows[:, k])
+    return out
+
+
+def _g_tables(Gs: jax.Array, st: _Structure, cfg: QPSettings, one: jax.Array):
+    """The g_rows, g_cols and gg_cols of _Scaled from Gs (m, n, ...), pinned."""
+    m, n = st.m, st.n
+    if st.pattern is None:  # dense: slices, no gathers
+        g_rows, g_cols = Gs, jp.swapaxes(Gs, 0, 1)
+        products = [Gs[:, j:] * Gs[:, j : j + 1] for j in range(n)]
+    else:
+        flat = jp.concatenate([Gs.reshape((m * n,) + Gs.shape[2:]), jp.zeros_like(Gs[:1, 0])])
+        g_rows, g_cols = flat[st.rows[0]], flat[st.cols[0]]
+        products = [None if t is None else flat[t[2]] * flat[t[3]] for t in st.normal]
+    gg_cols = []
+    for j, products_j in enumerate(products):
+        if products_j is None:
+            gg_cols.append(None)
+            continue
+        if st.normal[j][0] == 0:  # the diagonal entry is first
+            diag = _diagonal_factor(products_j.shape[1], cfg.regularization, Gs[0])
+            products_j = products_j * diag  # noqa: PLW2901
+        gg_cols.append(_pin(products_j, one))
+    return _pin(g_rows, one), _pin(g_cols, one), gg_cols
+
+
+def _prepare(P, q, G, h, cfg: QPSettings, st: _Structure) -> _Scaled:
+    """Sanitise (a non-finite problem becomes min 1/2|x|^2 s.t. 0 <= 1, flagged) and scale.
+
+    Entries of G outside the pattern st are set to 0, so they are never read.
+    """
     n = q.shape[0]
     # a runtime 1 (...) that XLA cannot fold (see _pin), cheap to recompute
     one = 1.0 + 0.0 * jp.isfinite(q[0]).astype(q.dtype)
+    if st.pattern is not None:
+        G = jp.where(st.mask.reshape(st.mask.shape + (1,) * (q.ndim - 1)), G, 0.0)
     finite = _all_finite(P, 2) & _all_finite(q) & _all_finite(G, 2) & _all_finite(h)
     finite = _pin_flag(finite, one)
     eye = jp.eye(n, dtype=q.dtype).reshape((n, n) + (1,) * (q.ndim - 1))
@@ -331,27 +465,30 @@ def _prepare(P, q, G, h, cfg: QPSettings) -> _Scaled:
     norms = _pin(jp.stack([_inf_norm(h), _inf_norm(q)]), one)
     Ps, qs = Ps * c, qs * c
     # H = Ps + Gs' diag(w) Gs is assembled by columns from the products of the rows of Gs.
-    p_cols, gg_cols = [], []
-    for j in range(n):
-        diag = _diagonal_factor(n - j, cfg.regularization, q)  # (n - j, 1, ...)
-        p_cols.append(Ps[j:, j] * diag)
-        gg_cols.append(Gs[:, j:] * Gs[:, j : j + 1] * diag)
+    p_cols = [Ps[j:, j] * _diagonal_factor(n - j, cfg.regularization, q) for j in range(n)]
     hs = h * e
     inverses = (inv_d, inv_e, inv_c)
+    tables = _g_tables(Gs, st, cfg, one)
     return _Scaled(
-        P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, gg_cols
+        P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, *tables, st
     )
 
 
 def _normal_columns(pr: _Scaled, w: jax.Array) -> list[jax.Array]:
     """w (m, ...) -> the columns H[j:, j] (n - j, ...) of H = Ps + Gs' diag(w) Gs, with the
-    diagonal times (1 + regularization): m n(n+1)/2 multiply-adds from the row products."""
+    diagonal times (1 + regularization), from the stored row products: m n(n+1)/2
+    multiply-adds for a dense G, only the pattern's products for a sparse one."""
     columns = []
-    for p_col, gg in zip(pr.p_cols, pr.gg_cols, strict=True):
-        col = p_col
-        for r in range(w.shape[0]):
-            col = col + gg[r] * w[r]
-        columns.append(col)
+    for p_col, gg, spec in zip(pr.p_cols, pr.gg_cols, pr.st.normal, strict=True):
+        if gg is None:
+            columns.append(p_col)
+            continue
+        lo, hi, _, _, rows = spec
+        part = p_col[lo:hi]
+        for t in range(rows.shape[0]):
+            part = part + gg[t] * _take(w, rows[t])
+        whole = hi - lo == len(p_col)
+        columns.append(part if whole else jp.concatenate([p_col[:lo], part, p_col[hi:]]))
     return columns
 
 
@@ -363,8 +500,8 @@ def _start(pr: _Scaled, warm, cfg: QPSettings):
     to >= warm_margin (1 + max z) (equilibrated units).
     """
     chol = _cholesky(_normal_columns(pr, jp.ones_like(pr.hs)), cfg.pivot_floor)
-    x0 = _cho_solve(chol, -pr.qs + _mtv(pr.Gs, pr.hs))
-    s0 = jp.maximum(pr.hs - _mv(pr.Gs, x0), 1.0)
+    x0 = _cho_solve(chol, -pr.qs + _g_mtv(pr, pr.hs))
+    s0 = jp.maximum(pr.hs - _g_mv(pr, x0), 1.0)
     z0 = jp.ones_like(pr.hs)
     if warm is None:
         return x0, s0, z0
@@ -373,7 +510,7 @@ def _start(pr: _Scaled, warm, cfg: QPSettings):
     xw = _pin(jp.nan_to_num(wx.astype(x0.dtype)) * pr.inv_d, pr.one)
     zw = jp.nan_to_num(wz.astype(x0.dtype)) * pr.c * pr.inv_e
     # lift both off the boundary, relative to their own scales
-    sw = jp.maximum(pr.hs - _mv(pr.Gs, xw), cfg.warm_margin * (1.0 + jp.abs(pr.hs)))
+    sw = jp.maximum(pr.hs - _g_mv(pr, xw), cfg.warm_margin * (1.0 + jp.abs(pr.hs)))
     zw = jp.maximum(zw, cfg.warm_margin * (1.0 + _pin(_max(zw), pr.one)))
     return tuple(jp.where(use, a, b) for a, b in ((xw, x0), (sw, s0), (zw, z0)))
 
@@ -401,7 +538,7 @@ def _residuals(pr: _Scaled, cfg: QPSettings, it: _Iterate) -> tuple[jax.Array, _
     """The scaled dual residual rd = Ps x + qs + Gs'z (n, ...) and the _Figures of the iterate."""
     m = pr.hs.shape[0]
     px = _pin(_mv(pr.Ps, it.x), pr.one)
-    rd = _pin(px + pr.qs + _mtv(pr.Gs, it.z), pr.one)
+    rd = _pin(px + pr.qs + _g_mtv(pr, it.z), pr.one)
     primal = _inf_norm(jp.maximum(it.gx - pr.hs, 0.0) * pr.inv_e)
     dual = _inf_norm(rd * pr.inv_d) * pr.inv_c
     gap = _dot(it.s, it.z) * pr.inv_c / m
@@ -419,7 +556,7 @@ def _residuals(pr: _Scaled, cfg: QPSettings, it: _Iterate) -> tuple[jax.Array, _
 
 def _newton_step(pr: _Scaled, cfg: QPSettings, it: _Iterate, rd: jax.Array) -> _Iterate:
     """One Mehrotra predictor-corrector step from `it`; returns the next _Iterate."""
-    Gs, m, one = pr.Gs, pr.hs.shape[0], pr.one
+    m, one = pr.hs.shape[0], pr.one
     x, s, z, gx = it
     rp = gx + s - pr.hs  # primal residual of G x + s = h
     mu = _pin(_dot(s, z) / m, one)
@@ -427,8 +564,8 @@ def _newton_step(pr: _Scaled, cfg: QPSettings, it: _Iterate, rd: jax.Array) -> _
     chol = _cholesky(_normal_columns(pr, w), cfg.pivot_floor)
 
     def direction(rc):  # Newton direction of the KKT system with Z ds + S dz = -rc
-        dx = _cho_solve(chol, -rd - _mtv(Gs, _pin(w * rp - rc / s, one)))
-        gdx = _pin(_mv(Gs, dx), one)
+        dx = _cho_solve(chol, -rd - _g_mtv(pr, _pin(w * rp - rc / s, one)))
+        gdx = _pin(_g_mv(pr, dx), one)
         ds = -rp - gdx
         dz = -(rc + z * ds) / s
         return dx, ds, dz, gdx
@@ -454,11 +591,11 @@ def _newton_step(pr: _Scaled, cfg: QPSettings, it: _Iterate, rd: jax.Array) -> _
     )
 
 
-def _kernel(P, q, G, h, warm, cfg: QPSettings) -> QPResult:
+def _kernel(P, q, G, h, warm, cfg: QPSettings, st: _Structure) -> QPResult:
     """The method on arrays with trailing batch axes (...); warm is None or (x, z, valid)."""
-    pr = _prepare(P, q, G, h, cfg)
+    pr = _prepare(P, q, G, h, cfg, st)
     x0, s0, z0 = _start(pr, warm, cfg)
-    it0 = _Iterate(x0, s0, z0, _mv(pr.Gs, x0))
+    it0 = _Iterate(x0, s0, z0, _g_mv(pr, x0))
     _, fig0 = _residuals(pr, cfg, it0)
     never = jp.asarray(cfg.iterations + 1, jp.int32)
 
@@ -508,18 +645,19 @@ def _result(pr: _Scaled, it: _Iterate, fig: _Figures, first: jax.Array) -> QPRes
 # Entry points and batching.
 
 
-def _run_kernel(args: tuple, cfg: QPSettings) -> QPResult:
+def _run_kernel(args: tuple, cfg: QPSettings, st: _Structure) -> QPResult:
     """args = (P, q, G, h) or (P, q, G, h, warm x, warm z, warm valid), trailing batch axes."""
     warm = tuple(args[4:]) or None
-    return _kernel(*args[:4], warm, cfg)
+    return _kernel(*args[:4], warm, cfg, st)
 
 
-def _solve_many(args: tuple, cfg: QPSettings) -> QPResult:
-    """args with a leading batch axis B: the kernel on chunks of _CHUNK problems, batch minor."""
+def _solve_many(args: tuple, cfg: QPSettings, st: _Structure) -> QPResult:
+    """args with a leading batch axis B: the kernel on chunks of problems, batch minor."""
     size = args[0].shape[0]
     # XLA:CPU: chunks that stay in cache, one after the other. An accelerator runs the whole
     # batch at once (the batch-minor layout is also what its memory coalescing wants).
-    chunk = min(_CHUNK, size) if jax.default_backend() == "cpu" else size
+    chunk = _CHUNK if st.pattern is None else _CHUNK_SPARSE
+    chunk = min(chunk, size) if jax.default_backend() == "cpu" else size
     n_chunks = -(-size // chunk)
     pad = n_chunks * chunk - size
     if pad:  # repeat the last problem to fill the last chunk
@@ -529,7 +667,7 @@ def _solve_many(args: tuple, cfg: QPSettings) -> QPResult:
         # transpose once: XLA:CPU would otherwise fuse the transpose into every reader (strided)
         one = 1.0 + 0.0 * jp.isfinite(chunk_args[1][:, 0]).astype(chunk_args[1].dtype)
         moved = (jp.moveaxis(a, 0, -1) for a in chunk_args)
-        res = _run_kernel(tuple(a if a.dtype == bool else _pin(a, one) for a in moved), cfg)
+        res = _run_kernel(tuple(a if a.dtype == bool else _pin(a, one) for a in moved), cfg, st)
         return jax.tree.map(lambda a: jp.moveaxis(a, -1, 0), res)
 
     if n_chunks == 1:
@@ -547,13 +685,13 @@ def _broadcast_unbatched(axis_size: int, in_batched, args) -> list[jax.Array]:
 
 
 @functools.lru_cache(maxsize=None)
-def _batched_solver(cfg: QPSettings):
+def _batched_solver(cfg: QPSettings, st: _Structure):
     """f(*args with a leading batch axis) -> QPResult with that axis; a vmap of f is merged into
     the same batch axis (nested vmaps become one batch)."""
 
     @jax.custom_batching.custom_vmap
     def many(*args):
-        return _solve_many(args, cfg)
+        return _solve_many(args, cfg, st)
 
     @many.def_vmap
     def _many_vmap(axis_size, in_batched, *args):
@@ -567,16 +705,16 @@ def _batched_solver(cfg: QPSettings):
 
 
 @functools.lru_cache(maxsize=None)
-def _solver(cfg: QPSettings):
+def _solver(cfg: QPSettings, st: _Structure):
     """f(*args of one problem) -> QPResult, whose vmap runs the batch-minor chunked kernel."""
 
     @jax.custom_batching.custom_vmap
     def one(*args):
-        return _run_kernel(args, cfg)
+        return _run_kernel(args, cfg, st)
 
     @one.def_vmap
     def _one_vmap(axis_size, in_batched, *args):
-        out = _batched_solver(cfg)(*_broadcast_unbatched(axis_size, in_batched, args))
+        out = _batched_solver(cfg, st)(*_broadcast_unbatched(axis_size, in_batched, args))
         return out, jax.tree.map(lambda _: True, out)
 
     return one
@@ -603,7 +741,26 @@ def _arguments(P, q, G, h, warm_start: QPResult | None) -> tuple:
     return (P, q, G, h, *warm)
 
 
-def solve(  # noqa: PLR0913 (the problem's four arrays plus two options)
+def _structure_of(G: jax.Array, g_pattern) -> _Structure:
+    """The static _Structure of G (m, n) for a g_pattern (None or an (m, n) bool array)."""
+    m, n = G.shape
+    if g_pattern is None:
+        return _structure(m, n, None)
+    if isinstance(g_pattern, jax.core.Tracer):
+        raise DpcError(
+            "g_pattern must be a concrete (static) array, e.g. a numpy constant; got a traced "
+            "value. Build it outside jit/vmap (it describes the problem's structure, not data)."
+        )
+    pattern = np.asarray(g_pattern)
+    if pattern.shape != (m, n) or pattern.dtype != bool:
+        raise DpcError(
+            f"g_pattern must be a bool array of G's shape {(m, n)} (True where G may be nonzero); "
+            f"got {pattern.dtype} {pattern.shape}."
+        )
+    return _structure(m, n, tuple(map(tuple, pattern.tolist())))
+
+
+def solve(  # noqa: PLR0913 (the problem's four arrays plus three options)
     P: jax.Array,
     q: jax.Array,
     G: jax.Array,
@@ -611,6 +768,7 @@ def solve(  # noqa: PLR0913 (the problem's four arrays plus two options)
     *,
     warm_start: QPResult | None = None,
     settings: QPSettings | None = None,
+    g_pattern: np.ndarray | None = None,
 ) -> QPResult:
     """Solve min 1/2 x'Px + q'x s.t. Gx <= h for one problem; see the module doc and QPResult.
 
@@ -619,13 +777,17 @@ def solve(  # noqa: PLR0913 (the problem's four arrays plus two options)
       warm_start: a previous QPResult of the same shapes; its x and z start the iteration
         (ignored where its `valid` is False).
       settings: QPSettings, defaults if None.
+      g_pattern: None (G dense), or a static (m, n) bool array, True where G may be nonzero;
+        G's other entries are taken as 0 and never read, and each iteration only forms the
+        products of the pattern's entries (e.g. `balance.G_PATTERN`: 40 of 288 entries).
     Returns the best iterate seen (smallest residual-to-tolerance ratio). Never raises inside jit:
     non-finite input gives valid False and x = 0 (shapes that are not one problem's raise
     DpcError when traced). Under jax.vmap the batch runs batch-minor (see the module doc); the
     results are the same as one call per problem up to float32 rounding.
     """
     cfg = settings or QPSettings()
-    return _solver(cfg)(*_arguments(P, q, G, h, warm_start))
+    args = _arguments(P, q, G, h, warm_start)
+    return _solver(cfg, _structure_of(args[2], g_pattern))(*args)
 
 
 def _solve_reference(  # noqa: PLR0913 (as solve)
@@ -636,8 +798,10 @@ def _solve_reference(  # noqa: PLR0913 (as solve)
     *,
     warm_start: QPResult | None = None,
     settings: QPSettings | None = None,
+    g_pattern: np.ndarray | None = None,
 ) -> QPResult:
     """`solve` without the batching rule: under vmap, the batch is the leading axis of every op
     (the layout before the batch-minor kernel). For benchmarks and tests only."""
     cfg = settings or QPSettings()
-    return _run_kernel(_arguments(P, q, G, h, warm_start), cfg)
+    args = _arguments(P, q, G, h, warm_start)
+    return _run_kernel(args, cfg, _structure_of(args[2], g_pattern))
