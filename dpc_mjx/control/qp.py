@@ -29,10 +29,10 @@ to the last, contiguous axis and runs the same code on chunks of `_CHUNK` = 64 p
 a G pattern), one after the other (`lax.map`): each XLA:CPU loop is then a SIMD loop over the
 chunk, and a chunk's data (~10 KB per problem dense) stay in the L2 cache. On a GPU the whole
 batch is one chunk. Arguments the vmap does not batch are broadcast; nested vmaps are merged
-into one batch. `_pin` marks the values that XLA:CPU would otherwise
-recompute inside every consumer. `_solve_reference` is the same code vmapped the default way
-(the batch on the leading axis), for the benchmark. custom_vmap has no reverse-mode autodiff;
-nothing differentiates through the solver.
+into one batch. `_pin` marks the values that XLA:CPU would otherwise recompute inside every
+consumer. `_solve_reference` is the same code vmapped the default way (the batch on the leading
+axis), for the benchmark. custom_vmap has no reverse-mode autodiff; nothing differentiates
+through the solver.
 
 Sparsity. `g_pattern` (static, (m, n) bool) says which entries of G can be nonzero; the kernel
 then stores and multiplies only those (index tables in `_Structure`): G x, G'y and the products
@@ -326,7 +326,7 @@ def _cholesky(columns: list[jax.Array], floor: float) -> list[tuple[jax.Array, j
     near-singular H). Only the lower triangle is read. The divides here and in _cho_solve
     also pin (see _pin) each entry of the factor and the solution: with reciprocals and
     multiplies instead, XLA:CPU recomputes the chains of updates in every consumer (measured
-    18x slower).
+    5-50x slower).
     """
     n = len(columns)
     h_diag = [c[0] for c in columns]
