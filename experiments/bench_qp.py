@@ -28,8 +28,8 @@ import sys
 import time
 from collections.abc import Callable
 
-if "--one-core" in sys.argv:  # before JAX (and its thread pool) starts; see main()
-    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+if "--one-core" in sys.argv:  # before JAX (and its thread pool) starts; the flag is in main()
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # Linux only
 
 import jax
 import jax.numpy as jp
@@ -209,7 +209,8 @@ def print_tables(bench: Bench) -> None:
     rows, acc, per_batch, osqp_us = bench.rows, bench.acc, bench.per_batch, bench.osqp_us
     print(
         f"\nBalance QPs (n=12, m=24), float32 JAX on {jax.devices()[0].device_kind}, "
-        f"{len(os.sched_getaffinity(0))} of {os.cpu_count()} CPU threads, "
+        f"{len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else '-'} of "
+        f"{os.cpu_count()} CPU threads, "
         f"load avg {os.getloadavg()[0]:.1f}\n"
     )
     print("| solver | batch | compile (s) | us/problem | solves/s | OSQP-py (setup+solve) / this |")
