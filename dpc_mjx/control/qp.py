@@ -413,8 +413,9 @@ def _g_mtv(pr: _Scaled, y: jax.Array) -> jax.Array:
     return out
 
 
-def _g_tables(Gs: jax.Array, st: _Structure, cfg: QPSettings, one: jax.Array):
-    """The g_rows, g_cols and gg_cols of _Scaled from Gs (m, n, ...), pinned."""
+def _g_tables(Gs: jax.Array, st: _Structure, cfg: QPSettings):
+    """The g_rows, g_cols and gg_cols of _Scaled from Gs (m, n, ...). (They need no pin: the
+    iterations read them as loop inputs, computed once; pinning them measured the same.)"""
     m, n = st.m, st.n
     if st.pattern is None:  # dense: slices, no gathers
         g_rows, g_cols = Gs, jp.swapaxes(Gs, 0, 1)
@@ -431,8 +432,8 @@ def _g_tables(Gs: jax.Array, st: _Structure, cfg: QPSettings, one: jax.Array):
         if st.normal[j][0] == 0:  # the diagonal entry is first
             diag = _diagonal_factor(products_j.shape[1], cfg.regularization, Gs[0])
             products_j = products_j * diag  # noqa: PLW2901
-        gg_cols.append(_pin(products_j, one))
-    return _pin(g_rows, one), _pin(g_cols, one), gg_cols
+        gg_cols.append(products_j)
+    return g_rows, g_cols, gg_cols
 
 
 def _prepare(P, q, G, h, cfg: QPSettings, st: _Structure) -> _Scaled:
@@ -468,7 +469,7 @@ def _prepare(P, q, G, h, cfg: QPSettings, st: _Structure) -> _Scaled:
     p_cols = [Ps[j:, j] * _diagonal_factor(n - j, cfg.regularization, q) for j in range(n)]
     hs = h * e
     inverses = (inv_d, inv_e, inv_c)
-    tables = _g_tables(Gs, st, cfg, one)
+    tables = _g_tables(Gs, st, cfg)
     return _Scaled(
         P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, *tables, st
     )
@@ -760,6 +761,12 @@ def _structure_of(G: jax.Array, g_pattern) -> _Structure:
     return _structure(m, n, tuple(map(tuple, pattern.tolist())))
 
 
+def _inputs(P, q, G, h, warm_start, settings, g_pattern) -> tuple:  # noqa: PLR0913, PLR0917
+    """(kernel arguments, QPSettings, _Structure) of a call of solve or _solve_reference."""
+    args = _arguments(P, q, G, h, warm_start)
+    return args, settings or QPSettings(), _structure_of(args[2], g_pattern)
+
+
 def solve(  # noqa: PLR0913 (the problem's four arrays plus three options)
     P: jax.Array,
     q: jax.Array,
@@ -785,9 +792,8 @@ def solve(  # noqa: PLR0913 (the problem's four arrays plus three options)
     DpcError when traced). Under jax.vmap the batch runs batch-minor (see the module doc); the
     results are the same as one call per problem up to float32 rounding.
     """
-    cfg = settings or QPSettings()
-    args = _arguments(P, q, G, h, warm_start)
-    return _solver(cfg, _structure_of(args[2], g_pattern))(*args)
+    args, cfg, st = _inputs(P, q, G, h, warm_start, settings, g_pattern)
+    return _solver(cfg, st)(*args)
 
 
 def _solve_reference(  # noqa: PLR0913 (as solve)
@@ -802,6 +808,4 @@ def _solve_reference(  # noqa: PLR0913 (as solve)
 ) -> QPResult:
     """`solve` without the batching rule: under vmap, the batch is the leading axis of every op
     (the layout before the batch-minor kernel). For benchmarks and tests only."""
-    cfg = settings or QPSettings()
-    args = _arguments(P, q, G, h, warm_start)
-    return _run_kernel(args, cfg, _structure_of(args[2], g_pattern))
+    return _run_kernel(*_inputs(P, q, G, h, warm_start, settings, g_pattern))
