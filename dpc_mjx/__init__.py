@@ -3,15 +3,15 @@
 import contextlib as _contextlib
 import io as _io
 
+from dpc_mjx._version import __version__
+
 # mujoco.mjx prints "Failed to import warp" when the optional GPU backend is absent; we use the
 # JAX backend, so import it once here with that message silenced.
 with _contextlib.redirect_stdout(_io.StringIO()):
     from mujoco import mjx  # noqa: F401
 
-__version__ = "0.1.0"
-
-from dpc_mjx import adapter, envs, io, robots, sac  # noqa: E402
+from dpc_mjx import adapter, control, envs, io, robots, sac  # noqa: E402
 from dpc_mjx.envs import make  # noqa: E402
 from dpc_mjx.errors import DpcError  # noqa: E402
 
-__all__ = ["DpcError", "__version__", "adapter", "envs", "io", "make", "robots", "sac"]
+__all__ = ["DpcError", "__version__", "adapter", "control", "envs", "io", "make", "robots", "sac"]

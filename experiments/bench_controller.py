@@ -17,12 +17,12 @@ import numpy as np
 
 import dpc_mjx  # noqa: F401
 from dpc_mjx import sim
-from dpc_mjx.bench import time_calls
 from dpc_mjx.control import gait
 from dpc_mjx.control.closed_loop import init_loop, make_chunk
 from dpc_mjx.control.controller import make_controller
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
+from dpc_mjx.run.bench import time_calls
 
 CHUNK = 50
 

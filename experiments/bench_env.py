@@ -2,14 +2,14 @@
 
     python experiments/bench_env.py [--arm regular] [--batches 1 64 256 1024] [--quick]
 
-What is measured: `dpc_mjx.bench` (also `dpc-mjx bench`). `--quick`: batches 1 and 16, 10 calls.
+What is measured: `dpc_mjx.run.bench` (also `dpc-mjx bench`). `--quick`: batches 1 and 16, 10 calls.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from dpc_mjx.bench import print_table
+from dpc_mjx.run.bench import print_table
 
 
 def main() -> None:

@@ -20,9 +20,9 @@ from mujoco import rollout
 
 import dpc_mjx  # noqa: F401  (silences mjx's warp import message)
 from dpc_mjx import sim
-from dpc_mjx.bench import time_calls
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
+from dpc_mjx.run.bench import time_calls
 
 CHUNK = 50
 

@@ -9,8 +9,9 @@ float64 with eps 1e-9 and polishing, on the first problems of the batch.
 Rows "ours" run `jax.vmap(qp.solve)` (the batch-minor kernel) with a dense G; "ours, G pattern"
 passes `g_pattern=balance.G_PATTERN`, as the controller does (40 of G's 288 entries can be
 nonzero); the "default vmap layout" row runs the same code vmapped the default way
-(`qp._solve_reference`); `--previous` adds a row for another version of qp.py, e.g.
-`git show <rev>:dpc_mjx/control/qp.py > /tmp/qp_prev.py`. `--one-core` pins the process (JAX's
+(`qp._solve_reference`); `--previous` adds a row for a single-file version of the solver (the
+revisions up to 84660d8, before `control/qp.py` became the package `control/qp/`), e.g.
+`git show 84660d8:dpc_mjx/control/qp.py > /tmp/qp_prev.py`. `--one-core` pins the process (JAX's
 threads included) to one CPU core, so that ours and OSQP each get one core.
 
     .venv/bin/python experiments/bench_qp.py           # full (~3 min on 2 cores)

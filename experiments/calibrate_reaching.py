@@ -4,7 +4,7 @@
         [--arms regular longer heavier double] [--controllers mbc oracle] [--seed 0] \
         [--set push_force=0,60 push_axis_weights=0.3,0.3,1 ...]
 
-Prints a markdown table (`dpc_mjx.eval`: fall rate with a 95% Wilson interval, mean return with
+Prints a markdown table (`dpc_mjx.run.eval`: fall rate with a 95% Wilson interval, mean return with
 a 95% normal interval, RMS roll and pitch, speed and yaw-rate RMSE over the steps before a fall).
 The disturbance distributions are the reaching task's defaults unless overridden with --set.
 """
@@ -15,7 +15,7 @@ import argparse
 import shlex
 import sys
 
-from dpc_mjx.eval import TABLE_HEADER, evaluate, table_row
+from dpc_mjx.run.eval import TABLE_HEADER, evaluate, table_row
 
 
 def _override(text: str) -> tuple[str, object]:

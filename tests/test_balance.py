@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_qp import N_PROBLEMS, _solve_batch, check_against_reference, osqp_reference
 
+from dpc_mjx import rotations
 from dpc_mjx.control import balance, qp
 
 PARAMS = balance.default_params()
@@ -205,7 +206,7 @@ def test_yaw_frame_inertia_approximation():
     prob = jax.jit(lambda s: balance.build_balance_qp(PARAMS, **s))(state)
     inertia_w = yaw @ np.asarray(PARAMS.inertia) @ yaw.T
     r = np.asarray(state["foot_pos"]) - np.asarray(state["com_pos"])
-    ang = np.concatenate([np.linalg.solve(inertia_w, balance.skew_np(ri)) for ri in r], axis=1)
+    ang = np.concatenate([np.linalg.solve(inertia_w, rotations.skew_np(ri)) for ri in r], axis=1)
     assert np.allclose(np.asarray(prob.M)[3:], ang, rtol=1e-4, atol=1e-5)
     assert np.allclose(np.asarray(prob.M)[:3], np.tile(np.eye(3) / MASS, (1, 4)), rtol=1e-6)
 
@@ -216,7 +217,7 @@ def test_rotation_vector_of_matrix():
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     vecs = [d * angle for d, angle in zip(dirs, (1e-7, 1e-3, 0.3, 1.0, 3.0), strict=True)]
     vecs += [np.array([np.pi - 1e-4, 0.0, 0.0]), np.array([0.0, 0.0, 0.0])]
-    log = jax.jit(jax.vmap(balance.rotvec_from_matrix))
+    log = jax.jit(jax.vmap(rotations.rotvec_from_matrix))
     mats = np.stack([Rotation.from_rotvec(v).as_matrix() for v in vecs]).astype(np.float32)
     got = np.asarray(log(jp.asarray(mats)))
     assert np.allclose(got, np.stack(vecs), atol=2e-6, rtol=1e-4), got

@@ -22,7 +22,6 @@ from brax.training.types import Transition
 from flax import struct
 
 import dpc_mjx.io as dio
-from dpc_mjx import serialization as ser
 from dpc_mjx.adapter.networks import (
     AdapterConfig,
     DecoderState,
@@ -33,8 +32,10 @@ from dpc_mjx.adapter.networks import (
     encoder_module,
 )
 from dpc_mjx.envs.config import EnvConfig
+from dpc_mjx.envs.observations import S_BODY_NAMES
 from dpc_mjx.errors import DpcError
-from dpc_mjx.inference import NumpyPolicy
+from dpc_mjx.io import serialization as ser
+from dpc_mjx.io.inference import NumpyPolicy
 from dpc_mjx.robots import spec_json
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
 from dpc_mjx.robots.variants import VARIANTS
@@ -43,6 +44,7 @@ from dpc_mjx.sac.networks import make_networks
 from dpc_mjx.sac.policy import PolicyState, act
 from dpc_mjx.sac.train import BestPolicy, Carry, SacConfig, TrainingState
 
+SHIPPED = pathlib.Path(dio.__file__).parent.parent / "artefacts" / "regular"
 _NUMPY_TOL = 1e-5  # numpy (float64) vs JAX (float32) inference, absolute, on z and a in [-1, 1]
 HIDDEN = (32, 24)  # not the defaults, so sizes must come from the sidecar
 CONFIG = AdapterConfig(hidden=HIDDEN)
@@ -148,6 +150,8 @@ def test_sidecar_describes_the_networks(exported):
     assert (p["hidden"], p["action_size"], p["observation_size"]) == (list(HIDDEN), 6, 13)
     assert p["observation_layout"][:3] == ["roll", "pitch", "wx"]
     assert p["observation_layout"][8:] == ["cmd_vx", "cmd_vy", "cmd_yaw", "z_0", "z_1"]
+    assert meta["observation"]["s_body"] == {"start": 0, "stop": 11, "names": list(S_BODY_NAMES)}
+    assert p["observation_layout"] == [*S_BODY_NAMES, "z_0", "z_1"]
     assert meta["action_scaling"]["u_scale"] == [50.0] * 3 + [15.0] * 3
     assert meta["encoders"]["regular"]["input_size"] == 26
     assert meta["encoders"]["regular"]["file"] == "encoder_regular.msgpack"
@@ -282,11 +286,17 @@ BROKEN = {
 def test_load_fails_with_a_clear_message(export_copy, case):
     edit, fragments = BROKEN[case]
     edit(export_copy)
+    _load_error(export_copy, fragments)
+
+
+def _load_error(folder, fragments: list[str]) -> str:
+    """The message of the DpcError `io.load(folder)` raises; it must hold every fragment."""
     with pytest.raises(DpcError) as info:
-        dio.load(export_copy)
+        dio.load(folder)
     message = str(info.value)
     for fragment in fragments:
         assert fragment in message, (fragment, message)
+    return message
 
 
 def test_read_msgpack_names_the_mismatching_leaf(tmp_path):
@@ -359,17 +369,26 @@ def test_numpy_policy_rejects_bad_input(exported, export_copy):
 
 
 def test_inference_imports_no_jax(exported):
-    import dpc_mjx.inference
+    """inference.py alone, in a Python where jax and flax cannot be imported, runs an export."""
+    import dpc_mjx.io.inference
 
-    assert dpc_mjx.inference.FORMAT_VERSION == dio.FORMAT_VERSION
+    assert dpc_mjx.io.inference.FORMAT_VERSION == dio.FORMAT_VERSION
+    assert dpc_mjx.io.inference.SIDECAR == dio.SIDECAR
     script = f"""
-import importlib.util, sys
+import importlib.abc, importlib.util, sys
+class NoJax(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("jax", "jaxlib", "flax", "dpc_mjx"):
+            raise ImportError(f"inference.py imported {{name}}")
+sys.meta_path.insert(0, NoJax())
 import numpy as np
-spec = importlib.util.spec_from_file_location("dpc_inference", {dpc_mjx.inference.__file__!r})
+spec = importlib.util.spec_from_file_location("dpc_inference", {dpc_mjx.io.inference.__file__!r})
 mod = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(mod)
-policy = mod.NumpyPolicy({str(exported)!r}, "regular")
-assert policy.u(np.zeros(26)).shape == (6,)
+for folder in ({str(exported)!r}, {str(SHIPPED)!r}):
+    policy = mod.NumpyPolicy(folder, "regular")
+    assert policy.u(np.zeros(26)).shape == (6,)
+assert "jax" not in sys.modules
 loaded = [m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib", "flax", "dpc_mjx")]
 assert not loaded, loaded
 """
@@ -382,6 +401,222 @@ assert not loaded, loaded
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
+
+
+# --------------------------------------------------------------------------- sidecar vs files
+# Each case corrupts one field of the shipped export's sidecar, or replaces one of its files with
+# a network of other sizes (its sha256 updated, so only the size check can catch it); `load` must
+# name the file, the field, both values and what to do.
+
+
+@pytest.fixture
+def shipped_copy(tmp_path) -> pathlib.Path:
+    return pathlib.Path(shutil.copytree(SHIPPED, tmp_path / "regular"))
+
+
+def _shipped_encoder(config: AdapterConfig) -> EncoderState:
+    return _encoder(21, 26, config)
+
+
+def _shipped_decoder(config: AdapterConfig, body: int = 11, target: int = 2) -> DecoderState:
+    k1, k2, k3 = jax.random.split(jax.random.PRNGKey(22), 3)
+    s_body = jp.zeros(11) if config.decoder_sees_body else None
+    params = decoder_module(config).init(k1, jp.zeros(config.latent_size), s_body)
+    return DecoderState(params=params, body_norm=_norm(k2, body), target_norm=_norm(k3, target))
+
+
+def _shipped_policy(obs_size=13, action_size=6, hidden=(128, 128), norm=None) -> PolicyState:
+    k1, k2 = jax.random.split(jax.random.PRNGKey(23))
+    params = make_networks(obs_size, action_size, hidden).policy_network.init(k1)
+    return PolicyState(params, _norm(k2, norm or obs_size), hidden, action_size)
+
+
+def _swap_file(name: str, tree):
+    """Replace file `name` with `tree`, its sha256 updated in the sidecar."""
+
+    def edit(d: pathlib.Path):
+        meta = json.loads((d / dio.SIDECAR).read_text())
+        entries = [meta["policy"], meta["decoder"], *meta["encoders"].values()]
+        (entry,) = [e for e in entries if e["file"] == name]
+        entry["sha256"] = ser.write_msgpack(d / name, tree() if callable(tree) else tree)
+        (d / dio.SIDECAR).write_text(json.dumps(meta))
+
+    return edit
+
+
+def _set(*keys, value):
+    def fn(meta):
+        node = meta
+        for k in keys[:-1]:
+            node = node[k]
+        node[keys[-1]] = value
+
+    return _edit_sidecar(fn)
+
+
+_NAMES = list(S_BODY_NAMES)
+_BIG_S_BODY = {"start": 0, "stop": 12, "names": [*_NAMES, "extra"]}
+_SWAPPED = [*_NAMES[:5], "vy", "vx", *_NAMES[7:], "z_0", "z_1"]
+SIDECAR_DISAGREES = {  # one field of dpc.json against another (or this library)
+    "decoder latent vs adapter_config": (
+        _set("decoder", "latent_size", value=3),
+        ["dpc.json", "decoder.latent_size is 3", "adapter_config.latent_size gives 2", "re-export"],
+    ),
+    "adapter_config latent vs policy input": (
+        _set("adapter_config", "latent_size", value=3),
+        ["dpc.json", "policy.observation_size=13", "latent_size (3) = 14", "re-export"],
+    ),
+    "decoder sees_body vs adapter_config": (
+        _set("decoder", "sees_body", value=False),
+        ["dpc.json", "decoder.sees_body is false", "decoder_sees_body gives true", "re-export"],
+    ),
+    "decoder out_size vs this library": (
+        _set("decoder", "out_size", value=3),
+        ["dpc.json", "decoder.out_size is 3", "predicts 2 values", "re-export"],
+    ),
+    "decoder target_layout vs out_size": (
+        _set("decoder", "target_layout", value=["roll_rate"]),
+        ["dpc.json", 'target_layout is ["roll_rate"]', "out_size is 2", "re-export"],
+    ),
+    "policy observation_layout vs s_body names": (
+        _set("policy", "observation_layout", value=_SWAPPED),
+        ["dpc.json", "policy.observation_layout is", '"vy", "vx"', '"vx", "vy"', "re-export"],
+    ),
+    "s_body names vs its start..stop": (
+        _set("observation", "s_body", "names", value=_NAMES[:10]),
+        ["dpc.json", "s_body.names has 10 names", "0..11 spans 11", "re-export"],
+    ),
+    "s_body vs this library's observations": (
+        _set("observation", "s_body", value=_BIG_S_BODY),
+        ["dpc.json", '"stop": 12', '"stop": 11', "dpc_mjx.envs.observations", "re-export"],
+    ),
+    "encoder input_size vs s_body": (
+        _set("encoders", "regular", "input_size", value=5),
+        ["dpc.json", "encoders.regular.input_size is 5", "s_body ends at 11", "re-export"],
+    ),
+    "u_scale vs policy action_size": (
+        _set("action_scaling", "u_scale", value=[15.0, 15.0, 60.0, 12.0, 12.0]),
+        ["dpc.json", "u_scale has 5 entries", "policy.action_size is 6", "re-export"],
+    ),
+    "u_scale vs env_config bounds": (
+        _set("action_scaling", "u_scale", value=[16.0, 15.0, 60.0, 12.0, 12.0, 3.0]),
+        ["dpc.json", "u_scale is [16.0,", "max_torque", "gives [15.0,", "re-export"],
+    ),
+    "sac_config hidden vs policy hidden": (
+        _set("sac_config", "hidden", value=[64, 64]),
+        ["dpc.json", "sac_config.hidden is [64, 64]", "policy.hidden gives [128, 128]"],
+    ),
+}
+_SHIPPED_CONFIG = AdapterConfig()  # the shipped adapter: latent 2, 2 x 128, decoder sees s_body
+FILE_DISAGREES = {  # a size in dpc.json against the file that holds it
+    "decoder file latent (the issue's case)": (
+        _swap_file("decoder.msgpack", lambda: _shipped_decoder(AdapterConfig(latent_size=3))),
+        ["decoder.msgpack (decoder)", "decoder.latent_size + s_body", "is 13 there but 14"],
+    ),
+    "decoder file sees no body": (
+        _swap_file(
+            "decoder.msgpack", lambda: _shipped_decoder(AdapterConfig(decoder_sees_body=False))
+        ),
+        ["decoder.msgpack (decoder)", "(decoder.sees_body=true) is 13 there but 2"],
+    ),
+    "decoder file hidden width": (
+        _swap_file("decoder.msgpack", lambda: _shipped_decoder(AdapterConfig(hidden=(128, 64)))),
+        ["decoder.msgpack (decoder)", "adapter_config.hidden[1] is 128 there but 64"],
+    ),
+    "decoder file target normaliser": (
+        _swap_file("decoder.msgpack", lambda: _shipped_decoder(_SHIPPED_CONFIG, target=3)),
+        ["decoder.msgpack", "decoder.out_size is 2 there but 3", "'target_norm.mean'"],
+    ),
+    "decoder file body normaliser": (
+        _swap_file("decoder.msgpack", lambda: _shipped_decoder(_SHIPPED_CONFIG, body=12)),
+        ["decoder.msgpack", "observation.s_body (stop - start) is 11 there but 12"],
+    ),
+    "decoder file depth": (
+        _swap_file(
+            "decoder.msgpack", lambda: _shipped_decoder(AdapterConfig(hidden=(128, 128, 128)))
+        ),
+        ["decoder.msgpack", "adapter_config.hidden lists 2 hidden layers", "the file has 3"],
+    ),
+    "adapter_config hidden vs decoder file": (
+        _set("adapter_config", "hidden", value=[128, 64]),
+        ["decoder.msgpack (decoder)", "adapter_config.hidden[1] is 64 there but 128"],
+    ),
+    "encoder file latent": (
+        _swap_file(
+            "encoder_regular.msgpack", lambda: _shipped_encoder(AdapterConfig(latent_size=3))
+        ),
+        ["encoder_regular.msgpack", "adapter_config.latent_size is 2 there but 3", "'params."],
+    ),
+    "encoder file hidden width": (
+        _swap_file(
+            "encoder_regular.msgpack", lambda: _shipped_encoder(AdapterConfig(hidden=(96, 128)))
+        ),
+        ["encoder_regular.msgpack", "adapter_config.hidden[0] is 128 there but 96"],
+    ),
+    "encoder input_size vs encoder file": (
+        _set("encoders", "regular", "input_size", value=29),
+        ["encoder_regular.msgpack", "encoders.regular.input_size is 29 there but 26", "(29,)"],
+    ),
+    "policy file action size": (
+        _swap_file("policy.msgpack", lambda: _shipped_policy(action_size=5)),
+        ["policy.msgpack (policy)", "2 * policy.action_size is 12 there but 10"],
+    ),
+    "policy file hidden width": (
+        _swap_file("policy.msgpack", lambda: _shipped_policy(hidden=(128, 64))),
+        ["policy.msgpack (policy)", "policy.hidden[1] is 128 there but 64"],
+    ),
+    "policy file depth": (
+        _swap_file("policy.msgpack", lambda: _shipped_policy(hidden=(128, 128, 128))),
+        ["policy.msgpack", "policy.hidden lists 2 hidden layers, so 3 layers", "the file has 4"],
+    ),
+    "policy file input size": (
+        _swap_file("policy.msgpack", lambda: _shipped_policy(obs_size=14, norm=13)),
+        ["policy.msgpack", "policy.observation_size is 13 there but 14", "hidden_0.kernel"],
+    ),
+    "policy file normaliser": (
+        _swap_file("policy.msgpack", lambda: _shipped_policy(norm=14)),
+        ["policy.msgpack", "policy.observation_size is 13 there but 14", "'obs_norm.mean'"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(SIDECAR_DISAGREES) + list(FILE_DISAGREES))
+def test_load_refuses_a_sidecar_that_disagrees(shipped_copy, case):
+    edit, fragments = (SIDECAR_DISAGREES | FILE_DISAGREES)[case]
+    dio.load(shipped_copy)  # the copy loads before the edit
+    edit(shipped_copy)
+    message = _load_error(shipped_copy, fragments)
+    assert "re-export" in message or "dpc_mjx.io.add_encoder" in message, message
+
+
+def test_shipped_export_records_its_layout_and_old_sidecars_still_load(shipped_copy):
+    """The shipped sidecar was rewritten with the layout (its msgpack files unchanged); a sidecar
+    written before the layout was recorded gives the same networks and outputs."""
+    meta = json.loads((SHIPPED / dio.SIDECAR).read_text())
+    assert meta["observation"]["s_body"] == {"start": 0, "stop": 11, "names": list(S_BODY_NAMES)}
+    obs = _obs(26, batch=8, seed=5)
+    art, numpy_policy = dio.load(SHIPPED), NumpyPolicy(SHIPPED, "regular")
+    assert numpy_policy.s_body == slice(0, 11)
+    _edit_sidecar(lambda m: m.pop("observation"))(shipped_copy)
+    old, old_numpy = dio.load(shipped_copy), NumpyPolicy(shipped_copy, "regular")
+    _assert_trees_equal(old.policy, art.policy)
+    a, a_old = art.dpc_policy("regular")(obs, None), old.dpc_policy("regular")(obs, None)
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(a_old))
+    np.testing.assert_array_equal(old_numpy.u(obs), numpy_policy.u(obs))
+    assert old_numpy.s_body == slice(0, 11)
+
+
+def test_numpy_policy_takes_the_layout_from_the_sidecar(shipped_copy):
+    moved = {"start": 1, "stop": 12, "names": list(S_BODY_NAMES)}  # after one other entry
+    _set("observation", "s_body", value=moved)(shipped_copy)
+    assert NumpyPolicy(shipped_copy, "regular").s_body == slice(1, 12)
+    with pytest.raises(DpcError, match="dpc_mjx.envs.observations"):
+        dio.load(shipped_copy)  # the library's envs observe s_body at 0..11
+    _set("observation", "s_body", value={"start": 0, "stop": 12, "names": _BIG_S_BODY["names"]})(
+        shipped_copy
+    )
+    with pytest.raises(ValueError, match=r"do not fit policy.observation_size 13"):
+        NumpyPolicy(shipped_copy, "regular")
 
 
 # --------------------------------------------------------------------------- checkpoints

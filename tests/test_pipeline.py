@@ -5,9 +5,11 @@ import json
 
 import pytest
 
-from dpc_mjx import DpcError, cli, io
-from dpc_mjx.pipeline import SHIPPED, RunConfig, read_run_config, start_run
-from dpc_mjx.serialization import jsonable
+from dpc_mjx import DpcError, io
+from dpc_mjx.io.serialization import jsonable
+from dpc_mjx.run import cli
+from dpc_mjx.run.config import RunConfig, read_run_config, start_run
+from dpc_mjx.run.pipeline import SHIPPED
 
 
 def test_run_config_takes_dotted_overrides_and_round_trips_through_json(tmp_path):

@@ -23,11 +23,12 @@ from helpers import FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
-from dpc_mjx.envs import base, carrying, pushing, registry, scripts, wrap_for_training
-from dpc_mjx.robots import props
+from dpc_mjx.envs import base, registry, wrap_for_training
+from dpc_mjx.envs.tasks import carrying, pushing, scripts
+from dpc_mjx.robots import objects
 
 _BATCH = 2
-_DEFAULTS = {  # task -> default arm (props.TASK_ARMS)
+_DEFAULTS = {  # task -> default arm (each env class's DEFAULT_ARM)
     "pushing": "pusher",
     "carrying": "regular",
     "carrying_high": "longer",
@@ -175,7 +176,7 @@ def test_carrying_grasps_carries_and_releases_the_ball(wrapped):
     d = jax.device_get(w.states[-1].pipeline_state)
     assert not np.any(d.eq_active[:, env.props.welds])
     assert np.all(m["ball_on_target"][-1] == 1), m["ball_target_dist"][-1]
-    # The released ball keeps rolling ~1 cm/s (props' rolling friction does not stop it).
+    # The released ball keeps rolling ~1 cm/s (`objects.BALL_FRICTION`'s rolling term is too low).
     assert np.all(m["ball_target_dist"][-1] < _BALL_PLACED)
     assert not m["fall"].any() and not m["nan_resets"].any()
 
@@ -217,14 +218,14 @@ def test_pushing_pose_meets_the_box_below_its_top():
     np.testing.assert_allclose(
         ee, [pushing.PUSH_REACH, 0.0, pushing.PUSH_HEIGHT], atol=_IK_CHECK_TOL
     )
-    assert pushing.PUSH_HEIGHT < 2 * props.BOX_HALF[2]
+    assert pushing.PUSH_HEIGHT < 2 * pushing.BOX_HALF[2]
 
 
 def test_unsuitable_arms_fail_before_anything_is_built(monkeypatch):
     def no_build(*_):
         pytest.fail("the scene was built before the arm was checked")
 
-    monkeypatch.setattr(props, "task_spec", no_build)
+    monkeypatch.setattr(objects, "robot_scene", no_build)  # every object task's scene starts here
     monkeypatch.setattr(base, "build", no_build)
     with recorded_compiles() as compiles:
         for task, arm, match in (

@@ -23,16 +23,16 @@ import pathlib
 import time
 
 import jax
-import jax.numpy as jp
 import numpy as np
 
+from dpc_mjx.envs import rollout
 from dpc_mjx.envs.base import DpcEnv
-from dpc_mjx.envs.observations import PRIVILEGED
+from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
 from dpc_mjx.envs.wrappers import wrap_for_training
 from dpc_mjx.errors import DpcError
 from dpc_mjx.progress import bar
 
-DRP = slice(2, 4)  # roll and pitch rate (rad/s, trunk frame) inside s_body
+DRP = S_BODY_DRP  # roll and pitch rate (rad/s, trunk frame) inside s_body
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,27 +127,28 @@ def collect(
         raise DpcError(f"n_envs must be a positive int, got {n_envs!r}.")
     layout = env.unwrapped.obs_layout
     batched = wrap_for_training(env)
-    action = jp.zeros((n_envs, env.action_size))
 
-    def one(state, _):
-        obs, u_oracle = state.obs, state.info["privileged"][:, PRIVILEGED["u_oracle"]]
-        state = batched.step(state, action)
-        keep = state.done == 0.0  # the next obs is a successor of obs
-        return state, (obs, u_oracle, state.obs[:, layout.s_body][:, DRP], keep)
+    def record(before, after):  # the obs, its oracle u and the next roll/pitch rates
+        u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
+        keep = after.done == 0.0  # the next obs is a successor of obs
+        return before.obs, u_oracle, after.obs[:, layout.s_body][:, DRP], keep
 
-    run = jax.jit(lambda s: jax.lax.scan(one, s, None, length=chunk))
     t0 = time.perf_counter()
-    state = jax.jit(batched.reset)(jax.random.split(jax.random.PRNGKey(seed), n_envs))
+    key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the zero policy
+    state = jax.jit(batched.reset)(jax.random.split(key, n_envs))
+    run_chunk = rollout.make_chunk(batched.step, rollout.zero_policy, chunk, record)
+    carry = (state, rollout.Tally.zeros(n_envs))
     ids = np.tile(np.arange(n_envs, dtype=np.int32), chunk)  # row order: (time, env)
     parts, kept, steps = [], 0, 0
     with bar(samples, "collect", "sample", progress) as pbar:
-        while kept < samples:
-            state, out = run(state)
+        for _, out in rollout.chunks(run_chunk, carry, key):
             obs, u, drp, keep = (np.asarray(x).reshape(-1, *x.shape[2:]) for x in out)
             parts.append((obs[keep], drp[keep], ids[keep], u[keep]))
             kept += int(keep.sum())
             steps += obs.shape[0]
             pbar.update(min(int(keep.sum()), samples - pbar.n))
+            if kept >= samples:
+                break
     obs = np.concatenate([p[0] for p in parts])[:samples].astype(np.float32)
     drp = np.concatenate([p[1] for p in parts])[:samples].astype(np.float32)
     env_id = np.concatenate([p[2] for p in parts])[:samples]

@@ -43,15 +43,16 @@ them, see tests.) `solve_balance` also multiplies the forces by the contact mask
 
 from __future__ import annotations
 
-import dataclasses
-from typing import NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jp
 import numpy as np
+from flax import struct
 
 from dpc_mjx.control import qp
 from dpc_mjx.errors import DpcError
+from dpc_mjx.rotations import matrix_from_rotvec_np, rotvec_from_matrix, skew, yaw_rotation
 
 GRAVITY = 9.81  # m/s^2
 N_FEET = 4
@@ -60,8 +61,7 @@ N_VARS = 3 * N_FEET  # 12
 N_ROWS = ROWS_PER_FOOT * N_FEET  # 24
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@struct.dataclass
 class BalanceParams:
     """Configuration of the balance QP. All fields are arrays (jit/vmap friendly).
 
@@ -126,11 +126,13 @@ def default_params(**overrides: float | tuple[float, ...] | jax.Array) -> Balanc
     )
 
 
-class BalanceQP(NamedTuple):
+@struct.dataclass
+class BalanceQP:
     """The balance QP `min 1/2 f'Pf + q'f + const  s.t.  G f <= h` and the model behind it.
 
     P: (12, 12), q: (12,), G: (24, 12), h: (24,), const: () (so the objective equals J/2).
     M: (6, 12) and b: (6,) of the cost || M f - b ||_Q^2; qdd_des: (6,) the eq. 9 acceleration.
+    contact: (4,) bool, the stance mask the QP was built for (solve_balance zeroes swing forces).
     """
 
     P: jax.Array
@@ -141,51 +143,7 @@ class BalanceQP(NamedTuple):
     M: jax.Array
     b: jax.Array
     qdd_des: jax.Array
-
-
-def skew(v: jax.Array) -> jax.Array:
-    """[v]x (..., 3, 3) such that [v]x w = v x w, for v (..., 3)."""
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    o = jp.zeros_like(x)
-    return jp.stack(
-        [jp.stack([o, -z, y], -1), jp.stack([z, o, -x], -1), jp.stack([-y, x, o], -1)], -2
-    )
-
-
-def rotvec_from_matrix(rot: jax.Array) -> jax.Array:
-    """log(R) as a rotation vector (3,) (rad) of a rotation matrix (3, 3); finite for any input.
-
-    Via the quaternion (Shepperd's branch choice, the largest of w, x, y, z computed from the
-    diagonal) so that angles near 0 and near pi are both accurate: theta = 2 atan2(|v|, w), w >= 0.
-    """
-    r = jp.nan_to_num(rot)
-    tr = r[0, 0] + r[1, 1] + r[2, 2]
-    # Four candidate (unnormalised) quaternions (w, x, y, z) * 4 * component; pick the stable one.
-    sx, sy, sz = r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]  # 4 w (x, y, z)
-    pxy, pxz, pyz = r[0, 1] + r[1, 0], r[0, 2] + r[2, 0], r[1, 2] + r[2, 1]
-    cand = jp.stack(
-        [
-            jp.stack([1 + tr, sx, sy, sz]),
-            jp.stack([sx, 1 + 2 * r[0, 0] - tr, pxy, pxz]),
-            jp.stack([sy, pxy, 1 + 2 * r[1, 1] - tr, pyz]),
-            jp.stack([sz, pxz, pyz, 1 + 2 * r[2, 2] - tr]),
-        ]
-    )
-    diag = jp.stack([tr, r[0, 0], r[1, 1], r[2, 2]])
-    quat = cand[jp.argmax(diag)]
-    quat = quat * jp.where(quat[0] < 0, -1.0, 1.0)  # w >= 0: the short way round
-    vnorm = jp.linalg.norm(quat[1:])
-    angle = 2.0 * jp.arctan2(vnorm, quat[0])
-    safe = jp.where(vnorm > 0, vnorm, 1.0)
-    return jp.where(vnorm > 0, quat[1:] * (angle / safe), jp.zeros(3, rot.dtype))
-
-
-def yaw_rotation(rot: jax.Array) -> jax.Array:
-    """R_z (3, 3): the rotation about world z by the yaw of `rot` (heading of the body x axis)."""
-    yaw = jp.arctan2(rot[1, 0], rot[0, 0])
-    c, s = jp.cos(yaw), jp.sin(yaw)
-    o, one = jp.zeros_like(c), jp.ones_like(c)
-    return jp.stack([jp.stack([c, -s, o]), jp.stack([s, c, o]), jp.stack([o, o, one])])
+    contact: jax.Array
 
 
 def friction_constraints(
@@ -278,43 +236,21 @@ def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts,
     q = -MtQ @ b
     const = 0.5 * jp.sum(params.Q * b * b)
     G, h = friction_constraints(params.mu, params.f_min, params.f_max, contact)
-    return BalanceQP(P=P, q=q, G=G, h=h, const=const, M=M, b=b, qdd_des=qdd_des)
+    return BalanceQP(P=P, q=q, G=G, h=h, const=const, M=M, b=b, qdd_des=qdd_des, contact=contact)
 
 
-def solve_balance(  # noqa: PLR0913, PLR0917 (build_balance_qp's arguments, solver options)
-    params: BalanceParams,
-    com_pos: jax.Array,
-    com_vel: jax.Array,
-    rot: jax.Array,
-    ang_vel: jax.Array,
-    com_pos_des: jax.Array,
-    com_vel_des: jax.Array,
-    rot_des: jax.Array,
-    ang_vel_des: jax.Array,
-    foot_pos: jax.Array,
-    contact: jax.Array,
-    f_a: jax.Array,
-    tau_a: jax.Array,
-    *,
+def solve_balance(
+    *args: Any,
     warm_start: qp.QPResult | None = None,
     settings: qp.QPSettings | None = None,
+    **kwargs: Any,
 ) -> tuple[jax.Array, qp.QPResult]:
-    """Build and solve the balance QP: foot forces (4, 3) (N, world; swing feet exactly 0)."""
-    prob = build_balance_qp(
-        params,
-        com_pos,
-        com_vel,
-        rot,
-        ang_vel,
-        com_pos_des,
-        com_vel_des,
-        rot_des,
-        ang_vel_des,
-        foot_pos,
-        contact,
-        f_a,
-        tau_a,
-    )
+    """Build and solve the balance QP: foot forces (4, 3) (N, world; swing feet exactly 0).
+
+    `args` and `kwargs` are `build_balance_qp`'s (params, state, desired state, contact, f_a,
+    tau_a); `warm_start` and `settings` are `qp.solve`'s. Returns the forces and the QPResult.
+    """
+    prob = build_balance_qp(*args, **kwargs)
     res = qp.solve(
         prob.P,
         prob.q,
@@ -324,7 +260,7 @@ def solve_balance(  # noqa: PLR0913, PLR0917 (build_balance_qp's arguments, solv
         settings=settings,
         g_pattern=G_PATTERN,
     )
-    forces = res.x.reshape(N_FEET, 3) * contact.astype(res.x.dtype)[:, None]
+    forces = res.x.reshape(N_FEET, 3) * prob.contact.astype(res.x.dtype)[:, None]
     return forces, res
 
 
@@ -332,20 +268,6 @@ STAND_HEIGHT = 0.27  # m, COM height of the A1 standing
 STANCE_PATTERNS = np.array(
     [[1, 1, 1, 1], [1, 0, 0, 1], [0, 1, 1, 0]], dtype=bool
 )  # stand, trot pair FR+RL, trot pair FL+RR (order FR, FL, RR, RL)
-
-
-def _rotation(axis_angle: np.ndarray) -> np.ndarray:
-    """Rodrigues: the rotation matrix (3, 3) of a rotation vector (3,)."""
-    angle = np.linalg.norm(axis_angle)
-    if angle == 0.0:
-        return np.eye(3)
-    k = skew_np(axis_angle / angle)
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
-
-
-def skew_np(v: np.ndarray) -> np.ndarray:
-    """[v]x (3, 3) in NumPy."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def sample_states(
@@ -372,12 +294,11 @@ def sample_states(
 
     for _ in range(n):
         yaw = rng.uniform(-np.pi, np.pi)
-        rot_des = _rotation(np.array([0.0, 0.0, yaw])) @ _rotation(rand_dir(0.1))
-        rot = _rotation(rand_dir(max_rot_err)) @ rot_des
+        heading = matrix_from_rotvec_np(np.array([0.0, 0.0, yaw]))  # (3, 3) about world z
+        rot_des = heading @ matrix_from_rotvec_np(rand_dir(0.1))
+        rot = matrix_from_rotvec_np(rand_dir(max_rot_err)) @ rot_des
         com = np.array([0.0, 0.0, STAND_HEIGHT]) + rng.normal(size=3) * 0.02
-        feet_xy = (nominal_feet + rng.normal(size=(4, 2)) * 0.03) @ _rotation(
-            np.array([0.0, 0.0, yaw])
-        )[:2, :2].T
+        feet_xy = (nominal_feet + rng.normal(size=(4, 2)) * 0.03) @ heading[:2, :2].T
         feet = np.concatenate([feet_xy + com[:2], np.zeros((4, 1))], axis=1)
         values = dict(
             com_pos=com,

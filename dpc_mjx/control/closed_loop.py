@@ -1,26 +1,44 @@
-"""Closed-loop MJX rollouts of the low-level controller, with locomotion metrics.
+"""The low-level controller's own test bench: the controller alone on MJX physics, with
+locomotion metrics.
 
-One tick = read state, pick u (mbc / oracle / given), controller step, one `mjx.step`. A chunk of
-ticks runs under `lax.scan` inside one jitted, vmapped call.
+This is not a second environment. Envs (`dpc_mjx.envs`, stepped by `dpc_mjx.envs.rollout`) are
+what policies, evaluation and data collection use: they add the policy rate (50 Hz), the arm's
+reference motions, pushes, payloads, rewards and observations. The bench runs the controller at
+the physics rate with none of that: a fixed command and an optional external trunk wrench, u
+chosen per tick (mbc / oracle / observer / given). It measures what the controller achieves by
+itself (tests/test_controller.py, experiments/locomotion.py, experiments/bench_controller.py)
+and uses the library's one fall test (`control.state.has_fallen`).
+
+One tick = read state, pick u, controller step, one `mjx.step`. A chunk of ticks runs under
+`lax.scan` inside one jitted, vmapped call.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import jax
 import jax.numpy as jp
+import numpy as np
 from flax import struct
 from mujoco import mjx
 
-from dpc_mjx.control.controller import ControllerState, LowLevelController, oracle_u
-from dpc_mjx.control.state import read_state
+from dpc_mjx import sim
+from dpc_mjx.control import gait
+from dpc_mjx.control.controller import (
+    ControllerState,
+    LowLevelController,
+    make_controller,
+    oracle_u,
+)
+from dpc_mjx.control.state import has_fallen, read_state
 from dpc_mjx.errors import DpcError
-from dpc_mjx.rotations import roll_pitch_yaw
+from dpc_mjx.robots import build
+from dpc_mjx.robots.standing import perturbed_home
+from dpc_mjx.rotations import roll_pitch_yaw, to_yaw_frame
 
-CONTROLLERS = ("mbc", "oracle", "given")
-FALL_HEIGHT = 0.15  # m: a trunk below this has fallen
-FALL_TILT = 1.0  # rad of roll or pitch: fallen
+CONTROLLERS = ("mbc", "oracle", "observer", "given")
 
 
 @struct.dataclass
@@ -57,8 +75,9 @@ def make_chunk(
 ) -> Callable:
     """jit(vmap) of `n_ticks` ticks: `(loop_state, command (B,3), wrench (B,6), u (B,6)) -> state`.
 
-    `kind`: 'mbc' (u = 0), 'oracle' (u = measured mount wrench + the known external wrench) or
-    'given' (u as passed). `wrench` is an external [force N, torque N·m] applied to the trunk at
+    `kind`: 'mbc' (u = 0), 'oracle' (u = measured mount wrench + the known external wrench),
+    'observer' (u = the momentum observer's estimate, `controller.observe`) or 'given' (u as
+    passed). `wrench` is an external [force N, torque N·m] applied to the trunk at
     its COM (world frame) in the simulation. Metrics start after `measure_after` s.
     """
     if kind not in CONTROLLERS:
@@ -76,6 +95,8 @@ def make_chunk(
             u = jp.zeros(6)
         elif kind == "oracle":
             u = oracle_u(lay, d, s.com_pos) + known
+        elif kind == "observer":
+            u = controller.observe(ls.ctrl, d).estimate
         else:
             u = u_given
         cs, ctrl = controller.step(ls.ctrl, d, command, u)
@@ -95,12 +116,9 @@ def make_chunk(
 
 def _update_metrics(m: LocoMetrics, d, t, command, measure_after, trunk) -> LocoMetrics:
     rpy = roll_pitch_yaw(d.qpos[3:7])
-    c, s = jp.cos(rpy[2]), jp.sin(rpy[2])
-    v = d.qvel[0:3]
-    fwd, lat = c * v[0] + s * v[1], -s * v[0] + c * v[1]  # yaw-frame velocity
+    fwd, lat, _ = to_yaw_frame(d.qvel[0:3], rpy[2])  # m/s, yaw frame
     yaw_rate = (d.xmat[trunk] @ d.qvel[3:6])[2]
-    fallen = m.fallen | (d.qpos[2] < FALL_HEIGHT) | (jp.abs(rpy[0]) > FALL_TILT)
-    fallen = fallen | (jp.abs(rpy[1]) > FALL_TILT) | ~jp.all(jp.isfinite(d.qpos))
+    fallen = m.fallen | has_fallen(d.qpos[2], rpy[:2]) | ~jp.all(jp.isfinite(d.qpos))
     w = ((t >= measure_after) & ~fallen).astype(jp.float32)
     return LocoMetrics(
         ticks=m.ticks + w,
@@ -115,17 +133,13 @@ def _update_metrics(m: LocoMetrics, d, t, command, measure_after, trunk) -> Loco
 
 def init_loop(controller: LowLevelController, data: mjx.Data) -> LoopState:
     """Batched loop state from batched data (committed to the device)."""
-    from dpc_mjx.sim import commit
-
     ctrl = jax.jit(jax.vmap(controller.init))(data)
     metrics = jax.vmap(lambda _: LocoMetrics.zeros())(jp.arange(data.qpos.shape[0]))
-    return commit(LoopState(ctrl, data, metrics))
+    return sim.commit(LoopState(ctrl, data, metrics))
 
 
 def summarize(m: LocoMetrics) -> dict[str, float]:
     """Batch summary: fall rate, and RMS errors over the envs that did not fall."""
-    import numpy as np
-
     m = jax.device_get(m)
     ok = ~np.asarray(m.fallen)
     ticks = max(float(np.sum(m.ticks[ok])), 1.0)
@@ -156,16 +170,6 @@ def run_locomotion(
     """Run `n_envs` perturbed robots of `variant` for each command (forward m/s, lateral m/s,
     yaw rate rad/s) with one compiled chunk; return one `summarize` dict per command, plus the
     measured env-steps/s and compile time."""
-    import time
-
-    import numpy as np
-
-    from dpc_mjx import sim
-    from dpc_mjx.control import gait
-    from dpc_mjx.control.controller import make_controller
-    from dpc_mjx.robots import build
-    from dpc_mjx.robots.standing import perturbed_home
-
     gaits = {"trot": gait.trot, "stand": gait.stand}
     if gait_name not in gaits:
         raise DpcError(f"Unknown gait {gait_name!r}; choose one of {sorted(gaits)}.")

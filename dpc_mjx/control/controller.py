@@ -6,10 +6,14 @@ env's `mjx.Data`; vmap at the call site. Controllers differ only in u:
 
 - `mbc`: u = 0 (the paper's model-based baseline, after Di Carlo et al. 2018);
 - `oracle`: u = the measured arm-mount wrench (privileged upper bound, `oracle_u`);
+- `observer`: u = the momentum observer's estimate (`observer.py`; no training, no force sensor),
+  `LowLevelController.observe(state, data).estimate`;
 - anything else (the DPC policy): pass its u.
 
 The controller's model is the bare A1 (trunk + legs, mass and inertia at the home pose): the arm
-is exactly the disturbance it does not model.
+is exactly the disturbance it does not model. Every controller carries the observer in its state
+(`ControllerState.observer`, updated each tick from the data and the previous tick's commanded
+forces); only `observer` feeds its estimate back as u.
 """
 
 from __future__ import annotations
@@ -22,9 +26,11 @@ import mujoco
 from flax import struct
 
 from dpc_mjx.control import balance, gait, qp, swing
+from dpc_mjx.control import observer as observer_lib
 from dpc_mjx.control.state import BodyState, StateIndex, read_state, state_index
 from dpc_mjx.robots.a1 import FOOT_RADIUS
 from dpc_mjx.robots.layout import Layout, layout, mount_wrench
+from dpc_mjx.rotations import rot_z, yaw_of
 
 
 @struct.dataclass
@@ -40,6 +46,9 @@ class ControllerConfig:
     raibert_k: float = 0.03  # s, velocity feedback of the foothold
     max_pos_error: float = 0.05  # m, clamp of the horizontal COM tracking error
     torque_limit: float = 33.5  # N·m, A1 joint torque limit
+    observer: observer_lib.ObserverConfig = struct.field(
+        default_factory=observer_lib.ObserverConfig
+    )  # gains of the disturbance observer (rad/s)
 
 
 @struct.dataclass
@@ -51,6 +60,7 @@ class ControllerState:
     stance: jax.Array  # (4,) bool, stance at the previous tick
     qp: qp.QPResult  # warm start for the next balance QP
     forces: jax.Array  # (4, 3) last ground reaction forces asked of the stance feet, N
+    observer: observer_lib.ObserverState  # the disturbance observer, updated every tick
 
 
 @struct.dataclass
@@ -64,15 +74,6 @@ class Plan:
     vel_des: jax.Array  # (3,) m/s, world
     yaw_des: jax.Array  # () rad
     yaw_rate_des: jax.Array  # () rad/s
-
-
-def yaw_of(rot: jax.Array) -> jax.Array:
-    return jp.arctan2(rot[1, 0], rot[0, 0])
-
-
-def rot_z(yaw: jax.Array) -> jax.Array:
-    c, s = jp.cos(yaw), jp.sin(yaw)
-    return jp.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,7 +104,17 @@ class LowLevelController:
             stance=jp.ones(4, bool),
             qp=jax.tree.map(jp.zeros_like, warm),
             forces=jp.zeros((4, 3)),
+            observer=observer_lib.init(self.config.balance, s),
         )
+
+    def observe(self, cs: ControllerState, d) -> observer_lib.ObserverState:
+        """The observer updated with this tick's data and the previous tick's commanded forces
+        (`step` makes the same update; `.estimate` (6,) is the `observer` controller's u)."""
+        return self._observe(cs, read_state(self.idx, d))
+
+    def _observe(self, cs: ControllerState, s: BodyState) -> observer_lib.ObserverState:
+        cfg = self.config
+        return observer_lib.update(cfg.observer, cfg.balance, cs.observer, s, cs.forces, self.dt)
 
     def plan(self, cs: ControllerState, d, command: jax.Array) -> Plan:
         """Read the state, the gait schedule and the desired body motion of this tick."""
@@ -195,6 +206,7 @@ class LowLevelController:
             stance=stance,
             qp=res,
             forces=forces,
+            observer=self._observe(cs, s),
         )
         return new, ctrl
 
@@ -209,6 +221,7 @@ def make_controller(
         params = balance.default_params(mass=idx.a1_mass, inertia=(1.0, 1.0, 1.0))
         params = dataclasses.replace(params, inertia=jp.asarray(idx.a1_inertia, jp.float32))
         config = ControllerConfig(balance=params, gait=gait_ or gait.trot())
+    config.observer.validate(float(model.opt.timestep))
     arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)
     return LowLevelController(
         idx=idx, lay=lay, dt=float(model.opt.timestep), config=config, arm_home=arm_home

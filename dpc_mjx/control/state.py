@@ -102,3 +102,14 @@ def read_state(idx: StateIndex, d) -> BodyState:
         hip_pos=d.xpos[idx.thighs],
         foot_jac=jp.swapaxes(jac[:, 6:, :], 1, 2),  # (4, 3 xyz, 3 joints)
     )
+
+
+# The fall test, the one used everywhere (env termination, the controller's test bench, demo).
+FALL_HEIGHT = 0.15  # m: a trunk below this has fallen
+FALL_TILT = 1.0  # rad of roll or pitch: fallen
+
+
+def has_fallen(trunk_height: jax.Array, roll_pitch: jax.Array) -> jax.Array:
+    """() bool: trunk height (m, world z) below `FALL_HEIGHT` or |roll| or |pitch| (rad,
+    `roll_pitch` (..., 2)) above `FALL_TILT`."""
+    return (trunk_height < FALL_HEIGHT) | jp.any(jp.abs(roll_pitch) > FALL_TILT, axis=-1)

@@ -6,6 +6,7 @@ at the physics rate (250 Hz), with u chosen by `config.controller`:
     'policy': u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)       (DPC)
     'mbc'   : u = 0, the action is ignored                                       (paper baseline)
     'oracle': u = measured arm-mount wrench (`controller.oracle_u`), action ignored
+    'observer': u = the momentum observer's estimate (`control/observer.py`), action ignored
 
 State (brax `State`):
     pipeline_state  mjx.Data
@@ -17,21 +18,21 @@ State (brax `State`):
                     'privileged' (10,) [u_oracle, payload, ee_force] (`observations.PRIVILEGED`);
                     'nan_reset' () 1.0 when this step was non-finite or exploded;
                     'objects' (n_obj, 3) m, world positions of the scene's free objects (box,
-                    balls; `props.prop_layout` order), only in scenes that have some
+                    balls; `objects.prop_layout` order), only in scenes that have some
 
 Tasks customise the env through hooks, never by rewriting `step`:
 
-    build_model(arm)        the compiled scene (objects: `props.task_spec(task, arm)`)
+    build_model(arm)        the compiled scene (objects: the task's `scene_spec(arm)`)
     check_arm(robot)        raise `DpcError` for an arm the task cannot use (before any compile)
     arm_targets(dist, t, d) (n_act,) arm servo targets at physics time t: the reference motion
                             p_arm (reaching: the sampler's random targets; tasks: scripts)
     task_physics(d, t)      edits the data before each mjx.step (carrying: grasp welds)
     task_metrics(d)         extra per-step metrics (scalars, the same keys at reset and step)
 
-Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`closed_loop.FALL_*`). A non-finite or
-exploded step (|qvel| > `explode_speed`) keeps the previous physics and controller state, returns
-obs = 0 and reward = 0 with done = 1 and is counted in `metrics['nan_resets']`; the auto-reset
-wrapper (`wrappers.wrap_for_training`) then resets that env alone.
+Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`control.state.has_fallen`). A
+non-finite or exploded step (|qvel| > `explode_speed`) keeps the previous physics and controller
+state, returns obs = 0 and reward = 0 with done = 1 and is counted in `metrics['nan_resets']`;
+the auto-reset wrapper (`wrappers.wrap_for_training`) then resets that env alone.
 """
 
 from __future__ import annotations
@@ -45,16 +46,17 @@ from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.control import gait
-from dpc_mjx.control.closed_loop import FALL_HEIGHT, FALL_TILT
-from dpc_mjx.control.controller import make_controller, oracle_u, yaw_of
+from dpc_mjx.control.controller import make_controller, oracle_u
+from dpc_mjx.control.state import has_fallen
 from dpc_mjx.envs import observations, rewards
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, make_sampler
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
-from dpc_mjx.robots.props import prop_layout
+from dpc_mjx.robots.objects import prop_layout
 from dpc_mjx.robots.variants import Arm, RobotSpec
+from dpc_mjx.rotations import yaw_of
 
 ACTION_SIZE = 6  # u = [f_a (3), tau_a (3)]
 # Per-step metrics (summed over an episode by brax's EpisodeWrapper):
@@ -187,6 +189,8 @@ class DpcEnv(Env):
                 u = jp.zeros(ACTION_SIZE)
             elif self.config.controller == "oracle":
                 u = oracle_u(self.lay, d, self._com_pos(d))
+            elif self.config.controller == "observer":
+                u = self.controller.observe(cs, d).estimate
             else:
                 u = u_policy
             targets = self.arm_targets(dist, d.time, d)
@@ -202,7 +206,7 @@ class DpcEnv(Env):
         sb = obs[self.obs_layout.s_body]
         vel = jp.stack([sb[5], sb[6], observations.world_yaw_rate(sb)])
         r = rewards.total_reward(vel, command, sb[:2], jp.zeros(2))  # desired roll = pitch = 0
-        fall = (d.qpos[2] < FALL_HEIGHT) | jp.any(jp.abs(sb[:2]) > FALL_TILT)
+        fall = has_fallen(d.qpos[2], sb[:2])
         privileged = self._privileged(d, dist)
         bad = ~(
             _finite(d.qpos, d.qvel, d.ctrl, obs, privileged, cs.forces, cs.qp.x, r["r_total"])

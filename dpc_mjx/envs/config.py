@@ -1,7 +1,7 @@
 """Environment configuration: one frozen dataclass, validated before anything is compiled.
 
-Every task has its own default (`dpc_mjx.envs.reaching.default_config()`); override fields by
-keyword (`dpc_mjx.make("a1_arm/reaching", arm="regular", controller="mbc")`) or with
+Every task has its own default (`dpc_mjx.envs.tasks.reaching.default_config()`); override fields
+by keyword (`dpc_mjx.make("a1_arm/reaching", arm="regular", controller="mbc")`) or with
 `config.replace(...)`. Ranges are `(low, high)` tuples of a uniform distribution, `# ~ U(low, high)`
 in the field comments; a range with low == high is a constant.
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 from dpc_mjx.errors import DpcError
 
-CONTROLLERS = ("policy", "mbc", "oracle")
+CONTROLLERS = ("policy", "mbc", "oracle", "observer")
 GAITS = ("trot", "stand")
 
 
@@ -23,7 +23,8 @@ class EnvConfig:
     """What one DPC environment does; units and distributions in the comments."""
 
     # Low-level controller and rates.
-    controller: str = "policy"  # 'policy': u = scaled action; 'mbc': u = 0; 'oracle': measured
+    controller: str = "policy"  # 'policy': u = scaled action; 'mbc': u = 0; 'oracle': measured;
+    # 'observer': u = the momentum observer's estimate (`control/observer.py`)
     gait: str = "trot"  # 'trot' or 'stand'
     policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`

@@ -21,9 +21,18 @@ import jax
 import jax.numpy as jp
 
 from dpc_mjx.robots.layout import Layout
-from dpc_mjx.rotations import roll_pitch_yaw
+from dpc_mjx.rotations import roll_pitch_yaw, to_yaw_frame
 
-S_BODY_SIZE = 11
+# s_body's entries, in order (units and frames as in the module docstring); the exports record it
+S_BODY_NAMES = (
+    *("roll", "pitch"),  # rad
+    *("wx", "wy", "wz"),  # rad/s, trunk frame
+    *("vx", "vy", "vz"),  # m/s, yaw frame
+    *("cmd_vx", "cmd_vy", "cmd_yaw"),  # velocity command: m/s, m/s (yaw frame), rad/s
+)
+S_BODY_SIZE = len(S_BODY_NAMES)  # 11
+# Roll and pitch rate (wx, wy; rad/s, trunk frame) inside s_body: the adapter decoder's target.
+S_BODY_DRP = slice(S_BODY_NAMES.index("wx"), S_BODY_NAMES.index("wy") + 1)
 # Privileged block: the measured mount wrench u = [f_a (N), tau_a (N·m)] about the A1 COM, world
 # frame (`controller.oracle_u`); total payload mass (kg); total force applied at the end
 # effectors by pushes, payload weight excluded (N, world).
@@ -65,10 +74,7 @@ class ObsLayout:
 
 def yaw_frame_velocity(d) -> jax.Array:
     """(3,) trunk linear velocity (m/s) in the yaw frame (heading-aligned, z up)."""
-    yaw = roll_pitch_yaw(d.qpos[3:7])[2]
-    c, s = jp.cos(yaw), jp.sin(yaw)
-    v = d.qvel[0:3]  # world frame for a free joint
-    return jp.stack([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+    return to_yaw_frame(d.qvel[0:3], roll_pitch_yaw(d.qpos[3:7])[2])  # free joint: world frame
 
 
 def s_body(d, command: jax.Array) -> jax.Array:

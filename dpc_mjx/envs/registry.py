@@ -1,8 +1,10 @@
 """Tasks by name: `make("a1_arm/reaching", arm="regular", **overrides)`.
 
-A name is `<robot>/<task>`. Tasks register an env class, a default config factory and a default
-arm (`props.TASK_ARMS`); `make` checks the name, the arm (known variant, and one the task can use)
-and the overrides, raising `DpcError` before anything is built or compiled, then builds the env.
+A name is `<robot>/<task>`. The task table maps a name to the task's env class, its default
+config factory and its default arm, all from the task's module in `dpc_mjx.envs.tasks` (the class
+declares `TASK`, `DEFAULT_ARM`, `check_arm` and `scene_spec`). `make` checks the name, the arm
+(known variant, and one the task can use) and the overrides, raising `DpcError` before anything
+is built or compiled, then builds the env; `scene_spec` / `build_scene` give a task's scene alone.
 
     task            default arm   scene
     reaching        regular       robot on a floor; random arm targets, pushes, payloads
@@ -19,11 +21,12 @@ import dataclasses
 from collections.abc import Callable
 from typing import Any
 
-from dpc_mjx.envs import carrying, lifting, pushing, reaching
+import mujoco
+
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
+from dpc_mjx.envs.tasks import carrying, lifting, pushing, reaching
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.props import TASK_ARMS
 from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 ROBOT = "a1_arm"
@@ -49,16 +52,14 @@ def register(
     TASKS[f"{ROBOT}/{task}"] = Task(env_class, default_config, default_arm)
 
 
-register("reaching", reaching.ReachingEnv, reaching.default_config, TASK_ARMS["reaching"])
-register("pushing", pushing.PushingEnv, pushing.default_config, TASK_ARMS["pushing"])
-register("carrying", carrying.CarryingEnv, carrying.default_config, TASK_ARMS["carrying"])
-register(
-    "carrying_high",
-    carrying.CarryingHighEnv,
-    carrying.default_config,
-    TASK_ARMS["carrying_high"],
-)
-register("lifting", lifting.LiftingEnv, lifting.default_config, TASK_ARMS["lifting"])
+for _env, _config in (  # each class names its task and default arm
+    (reaching.ReachingEnv, reaching.default_config),
+    (pushing.PushingEnv, pushing.default_config),
+    (carrying.CarryingEnv, carrying.default_config),
+    (carrying.CarryingHighEnv, carrying.default_config),
+    (lifting.LiftingEnv, lifting.default_config),
+):
+    register(_env.TASK, _env, _config, _env.DEFAULT_ARM)
 
 
 def known_tasks() -> list[str]:
@@ -84,6 +85,25 @@ def make(name: str, arm: str | Arm | RobotSpec | None = None, **overrides: Any) 
     arm = task.default_arm if arm is None else arm
     task.env_class.check_arm(resolve(arm))  # a bad or unsuitable arm fails here
     return task.env_class(config, arm)
+
+
+def scene_spec(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
+    """Task `name`'s scene with arm variant `arm` (None: `default_arm(name)`) as an uncompiled
+    spec: the robot at the origin in its home key, the task's objects at rest. The env may edit
+    it further (carrying moves the robot to `robot_x`); use `make(name).model` for the env's."""
+    task = _task(name)
+    scene = getattr(task.env_class, "scene_spec", None)
+    if scene is None:
+        raise DpcError(
+            f"Task {name!r} ({task.env_class.__name__}) has no `scene_spec`; build its env with "
+            "`make` and read `env.model`."
+        )
+    return scene(task.default_arm if arm is None else arm)
+
+
+def build_scene(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjModel:
+    """Compile `scene_spec(name, arm)`."""
+    return scene_spec(name, arm).compile()
 
 
 def _task(name: str) -> Task:

@@ -1,23 +1,31 @@
 """The A1 with parametric or URDF arms: specs, named variants, compiled models, batched params,
-and the task scenes' objects (`props`)."""
+and the scene objects (`objects`: boxes, tables, balls, weld grasps; the tasks that place them
+own their scenes in `dpc_mjx.envs.tasks`)."""
 
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
 from dpc_mjx.robots.assemble import build, build_spec, robot_spec
-from dpc_mjx.robots.props import TASKS, build_task_scene, prop_layout, task_spec
+from dpc_mjx.robots.layout import Layout, layout, mount_wrench
+from dpc_mjx.robots.objects import prop_layout
+from dpc_mjx.robots.params import batch_arm_params
+from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 from dpc_mjx.robots.variants import VARIANTS, RobotSpec, resolve
 
 __all__ = [
-    "TASKS",
     "VARIANTS",
     "ArmSpec",
+    "Layout",
     "Mount",
     "RobotSpec",
     "UrdfArm",
+    "batch_arm_params",
     "build",
     "build_spec",
-    "build_task_scene",
+    "home_ctrl",
+    "layout",
+    "mount_wrench",
+    "perturbed_home",
     "prop_layout",
     "resolve",
     "robot_spec",
-    "task_spec",
+    "with_leg_servos",
 ]

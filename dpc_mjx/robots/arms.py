@@ -248,29 +248,17 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     spec.compiler.degree = False  # every angle here is in rad (MjSpec's default is degrees)
     spec.modelname = "widowx"
     r = arm.link_radius
-    capsule, cyl = mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER
+    capsule = mujoco.mjtGeom.mjGEOM_CAPSULE
     rgba = [0.15, 0.15, 0.15, 1]
 
     base = spec.worldbody.add_body(name="base")
     base.fuse = 0  # keep the welded base apart from the trunk: the mount sensors live in it
-    _set_inertia(
-        base,
-        arm.base_mass,
-        (0, 0, BASE_HEIGHT / 2),
-        rod_inertia(arm.base_mass, BASE_HEIGHT, 0.04, 2),
-    )
-    base.add_geom(type=cyl, size=[0.04, BASE_HEIGHT / 2, 0], pos=[0, 0, BASE_HEIGHT / 2], rgba=rgba)
+    _add_post(base, arm.base_mass, BASE_HEIGHT, 0.04, rgba)
     _add_mount_sensors(spec, base)
 
     turret = base.add_body(name="turret", pos=[0, 0, BASE_HEIGHT])
     turret_h = arm.shoulder_height - BASE_HEIGHT
-    _set_inertia(
-        turret,
-        arm.turret_mass,
-        (0, 0, turret_h / 2),
-        rod_inertia(arm.turret_mass, turret_h, 0.03, 2),
-    )
-    turret.add_geom(type=cyl, size=[0.03, turret_h / 2, 0], pos=[0, 0, turret_h / 2], rgba=rgba)
+    _add_post(turret, arm.turret_mass, turret_h, 0.03, rgba)
 
     upper = turret.add_body(name="upper_arm", pos=[0, 0, turret_h])
     L1 = arm.upper_arm_length
@@ -318,6 +306,17 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     for geom in spec.geoms:
         make_visual(geom)
     return spec
+
+
+def _add_post(body: mujoco.MjsBody, mass: float, height: float, radius: float, rgba: list) -> None:
+    """A vertical cylinder (m) from the body's origin up: its mass, inertia and geom."""
+    _set_inertia(body, mass, (0, 0, height / 2), rod_inertia(mass, height, radius, 2))
+    body.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        size=[radius, height / 2, 0],
+        pos=[0, 0, height / 2],
+        rgba=rgba,
+    )
 
 
 def _add_gripper(gripper: mujoco.MjsBody, mass: float, rgba: list) -> mujoco.MjsBody:

@@ -26,8 +26,9 @@ import datetime
 import pathlib
 from typing import Any
 
-from dpc_mjx import serialization as ser
+from dpc_mjx._version import __version__
 from dpc_mjx.errors import DpcError
+from dpc_mjx.io import serialization as ser
 
 FORMAT_VERSION = 1  # of the checkpoint pair
 MSGPACK = "checkpoint.msgpack"
@@ -40,14 +41,12 @@ def save(run_dir: str | pathlib.Path, carry: Any, meta: dict, history: list[dict
     """Checkpoint `carry` (any flax-serializable pytree; its `epoch` is recorded if it has one)
     with `meta` (what must match on resume: the SAC config, the observation size) and the
     per-epoch `history` rows."""
-    import dpc_mjx  # for __version__ (a module-level import would be circular)
-
     run_dir = pathlib.Path(run_dir)
     digest = ser.write_msgpack(run_dir / STAGED, carry)
     epoch = getattr(carry, "epoch", None)
     record = {
         "format_version": FORMAT_VERSION,
-        "library_version": dpc_mjx.__version__,
+        "library_version": __version__,
         "saved": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "epoch": None if epoch is None else int(epoch),
         "sha256": digest,

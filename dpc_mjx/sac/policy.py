@@ -5,7 +5,7 @@ The actor is brax's SAC policy MLP; deployed, it acts with the mode of its tanh-
     a = tanh(loc),  [loc, scale] = MLP((obs - mean) / std),  obs = [s_body, z]
 
 `dpc_policy` chains the frozen encoder and the actor into the policy of a raw DPC env (whose
-observation is `[s_body, s_arm, p_arm]`), the form `envs.episodes.run_episodes` takes.
+observation is `[s_body, s_arm, p_arm]`), the form `envs.rollout.run_episodes` takes.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from dpc_mjx import fitting
 from dpc_mjx.adapter.data import Dataset
 from dpc_mjx.adapter.networks import AdapterConfig, EncoderState, encode
 from dpc_mjx.errors import DpcError
-from dpc_mjx.sac.train import Carry, Trainer
+from dpc_mjx.sac.trainer import Carry, Trainer
 
 U_CLIP = 0.95  # targets stay inside tanh's range
 

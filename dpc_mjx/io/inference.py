@@ -5,11 +5,15 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
 `dpc_mjx.io.export`:
 
     policy = NumpyPolicy("export/", arm="regular")
-    u = policy.u(obs)   # obs = [s_body (11), s_arm (2 n), p_arm (n_act)], the raw env observation
+    u = policy.u(obs)   # obs = [s_body, s_arm (2 n), p_arm (n_act)], the raw env observation
 
     z = tanh(E((obs - mean_E) / std_E))                                  latent (latent_size,)
     a = tanh(pi(([s_body, z] - mean_pi) / std_pi)[:action_size])         action in [-1, 1]^6
     u = u_scale * a: [f_a (N), tau_a (N m)], per component                world frame, about the COM
+
+Every size and the layout come from the sidecar: s_body = obs[start:stop] with
+`observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
+first, policy.observation_size - latent_size long).
 
 E and pi are ReLU MLPs (Dense layers `hidden_0 .. hidden_k`, then `out` for E; the last
 `hidden_k` is pi's output). The msgpack files use flax's format: a dict tree whose arrays are
@@ -27,8 +31,7 @@ import msgpack
 import numpy as np
 
 FORMAT_VERSION = 1  # the export format read here; equal to dpc_mjx.io.FORMAT_VERSION
-SIDECAR = "dpc.json"
-S_BODY_SIZE = 11  # roll, pitch, wx, wy, wz, vx, vy, vz, cmd_vx, cmd_vy, cmd_yaw
+SIDECAR = "dpc.json"  # equal to dpc_mjx.io.SIDECAR
 _NDARRAY_EXT = 1  # flax's msgpack ExtType code of an ndarray
 
 
@@ -102,6 +105,18 @@ def _norm(tree: dict, key: str, n: int, path: pathlib.Path) -> tuple[np.ndarray,
     return mean, std
 
 
+def _s_body(meta: dict, size: int) -> slice:
+    """Where s_body sits in the observation: the sidecar's observation.s_body, or for a sidecar
+    written before it was recorded, the first `size` entries."""
+    if "observation" not in meta:
+        return slice(0, size)
+    s = meta["observation"]["s_body"]
+    start, stop = int(s["start"]), int(s["stop"])
+    if not 0 <= start < stop or len(s["names"]) != stop - start:
+        raise ValueError(f"observation.s_body {s!r} is not a slice [start, stop) with its names")
+    return slice(start, stop)
+
+
 def _file(directory: pathlib.Path, name: str) -> pathlib.Path:
     if not isinstance(name, str) or pathlib.PurePath(name).name != name or name in ("", ".", ".."):
         raise ValueError(f"file {name!r} is not a file name in the export folder")
@@ -113,7 +128,8 @@ class NumpyPolicy:
 
     Each method takes one observation (input_size,) or a batch (B, input_size) and returns (k,)
     or (B, k). Attributes: `meta` (the sidecar), `arm`, `input_size`, `latent_size`,
-    `action_size`, `scale` (6,) (u = scale * a; N for f_a, N·m for tau_a).
+    `action_size`, `s_body` (its slice of the observation), `scale` (6,) (u = scale * a; N for
+    f_a, N·m for tau_a).
     """
 
     def __init__(self, directory: str | pathlib.Path, arm: str) -> None:
@@ -126,6 +142,8 @@ class NumpyPolicy:
             pol, scaling, encoders = meta["policy"], meta["action_scaling"], meta["encoders"]
             hidden, action_size = [int(h) for h in pol["hidden"]], int(pol["action_size"])
             u_scale = [float(v) for v in scaling["u_scale"]]  # (6,) N, N·m per unit action
+            obs_size = int(pol["observation_size"])  # [s_body, z]
+            s_body = _s_body(meta, obs_size - latent)
             enc = encoders.get(arm)
             if enc is not None:
                 input_size = int(enc["input_size"])  # [s_body, s_arm, p_arm] of this arm
@@ -146,6 +164,14 @@ class NumpyPolicy:
             )
         self.meta, self.arm, self.input_size = meta, arm, input_size
         self.latent_size, self.action_size = latent, action_size
+        self.s_body = s_body  # of the observation
+        n_body = s_body.stop - s_body.start
+        if n_body + latent != obs_size or s_body.stop > input_size:
+            raise ValueError(
+                f"{d / SIDECAR}: s_body = obs[{s_body.start}:{s_body.stop}] and latent_size "
+                f"{latent} do not fit policy.observation_size {obs_size} and the encoder's input "
+                f"size {input_size}; re-export the artefacts."
+            )
         if len(u_scale) != action_size:
             raise ValueError(
                 f"{d / SIDECAR}: action_scaling.u_scale has {len(u_scale)} entries, the policy "
@@ -162,8 +188,8 @@ class NumpyPolicy:
         tree = read_tree(pol_path, pol.get("sha256"))
         layers = _get(tree, ("params", "params"), pol_path)
         self._pi = _mlp(layers, [f"hidden_{i}" for i in range(len(hidden) + 1)], pol_path)
-        self._pi_norm = _norm(tree, "obs_norm", S_BODY_SIZE + latent, pol_path)
-        self._check(self._pi, S_BODY_SIZE + latent, 2 * action_size, pol_path)
+        self._pi_norm = _norm(tree, "obs_norm", obs_size, pol_path)
+        self._check(self._pi, obs_size, 2 * action_size, pol_path)
         if [k.shape[1] for k, _ in self._pi[:-1]] != hidden:
             raise ValueError(
                 f"{pol_path}: hidden sizes differ from {SIDECAR}'s {hidden}; re-export."
@@ -183,8 +209,8 @@ class NumpyPolicy:
         if x.ndim not in (1, 2) or x.shape[-1] != self.input_size:
             raise ValueError(
                 f"Observation of shape {x.shape}: the encoder of arm {self.arm!r} takes "
-                f"({self.input_size},) or (B, {self.input_size}) = [s_body ({S_BODY_SIZE}), s_arm, "
-                "p_arm] of that arm's env; pass that arm's raw observation."
+                f"({self.input_size},) or (B, {self.input_size}) = [s_body, s_arm, p_arm] of that "
+                "arm's env; pass that arm's raw observation."
             )
         bad = ~np.isfinite(x)
         if bad.any():
@@ -205,7 +231,7 @@ class NumpyPolicy:
     def action(self, obs) -> np.ndarray:
         """Deterministic action a (..., action_size) in [-1, 1]: the actor's mode."""
         x = self._obs(obs)
-        pi_in = np.concatenate([x[..., :S_BODY_SIZE], self._latent(x)], axis=-1)
+        pi_in = np.concatenate([x[..., self.s_body], self._latent(x)], axis=-1)
         mean, std = self._pi_norm
         return np.tanh(_forward(self._pi, (pi_in - mean) / std)[..., : self.action_size])
 

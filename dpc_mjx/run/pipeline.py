@@ -10,7 +10,7 @@ The run folder (every file written atomically; `resume=True` continues a killed 
     sac/                 sac_log.csv (one row per epoch) and the SAC checkpoint
     export/              the deployable artefacts (`dpc_mjx.io.export`; `dpc-mjx eval --run`)
     plots/               adapter_loss.png, posture_prediction.png, training_curve.png
-    eval.md              MBC vs DPC vs oracle table (`dpc_mjx.eval` protocol)
+    eval.md              MBC vs DPC vs oracle table (`dpc_mjx.run.eval` protocol)
     summary.json         wall time of every stage, sample counts, the evaluation
 """
 
@@ -19,122 +19,23 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import time
-from typing import Any
 
 import numpy as np
 
 from dpc_mjx import adapter as adapter_lib
-from dpc_mjx import io, plots, sac
+from dpc_mjx import io, sac
 from dpc_mjx.adapter import checkpoint as adapter_checkpoint
 from dpc_mjx.envs.registry import get_config, make
-from dpc_mjx.errors import DpcError
-from dpc_mjx.eval import TABLE_HEADER, CellResult, evaluate, table_row
+from dpc_mjx.io.serialization import write_json
+from dpc_mjx.run import plots
+from dpc_mjx.run.config import RunConfig, read_run_config, start_run, tuples
+from dpc_mjx.run.eval import TABLE_HEADER, CellResult, evaluate, table_row, write_episodes_csv
 from dpc_mjx.sac import warm_start
-from dpc_mjx.serialization import jsonable, read_json, write_json
 
-SHIPPED = pathlib.Path(__file__).parent / "artefacts" / "regular"  # the trained run's export
-CONFIG_FILE = "config.json"
-ACTOR_INITS = ("random", "oracle_regression")
+SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the trained run's export
 DATA_FILE = "data.npz"  # the adapter's samples, in the run's adapter folder
 SUMMARY_FILE = "summary.json"
-
-
-# The SAC settings of the shipped run (docs/results.md, "DPC on the reaching task"): a longer run
-# than SacConfig's default, larger batches, a shorter horizon (a push acts within ~0.2-1 s), a
-# low starting temperature and a slow actor, so that the oracle-regressed actor is refined rather
-# than overwritten; the critics learn alone for the first 20,000 gradient steps.
-TRAINED_SAC = sac.SacConfig(
-    num_timesteps=1_000_000,
-    batch_size=512,
-    discounting=0.97,
-    init_alpha=0.01,
-    actor_warmup_steps=20_000,
-    actor_learning_rate=3e-5,
-)
-
-
-@dataclasses.dataclass(frozen=True)
-class RunConfig:
-    """Everything a run does (the env's own options are `env_overrides` of its task config).
-
-    The defaults are the recipe of the shipped `regular` run. The paper's recipe (SAC from a
-    random actor) is `actor_init="random"` with `SacConfig()`'s settings, e.g. on the command line
-    `--set actor_init=random sac.init_alpha=1.0 sac.actor_warmup_steps=0`.
-    """
-
-    task: str = "a1_arm/reaching"
-    arm: str = "regular"  # a variant name (`dpc_mjx.robots.VARIANTS`)
-    env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
-    samples: int = 100_000  # random-motion transitions for the adapter
-    data_envs: int = 64
-    adapter: adapter_lib.AdapterConfig = adapter_lib.AdapterConfig()
-    sac: sac.SacConfig = TRAINED_SAC
-    eval_episodes: int = 64
-    eval_steps: int = 1000  # env steps of 20 ms
-    eval_controllers: tuple[str, ...] = ("mbc", "dpc", "oracle")
-    # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
-    # the oracle's u over the adapter's samples, `sac.warm_start`; then SAC as usual)
-    actor_init: str = "oracle_regression"
-    seed: int = 0
-
-    def validate(self) -> None:
-        get_config(self.task, **self.env_overrides)  # task name and overrides
-        for name in ("samples", "data_envs", "eval_episodes", "eval_steps"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or v < 1:
-                raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
-        self.adapter.validate()
-        self.sac.validate()
-        if self.actor_init not in ACTOR_INITS:
-            raise DpcError(f"actor_init={self.actor_init!r} is not one of {list(ACTOR_INITS)}.")
-
-    def to_json(self) -> dict:
-        return jsonable(dataclasses.asdict(self))
-
-    @classmethod
-    def from_json(cls, d: dict) -> RunConfig:
-        try:
-            d = dict(d)
-            d["adapter"] = adapter_lib.AdapterConfig(**_tuples(d["adapter"]))
-            d["sac"] = sac.SacConfig(**_tuples(d["sac"]))
-            d["eval_controllers"] = tuple(d["eval_controllers"])
-            d["env_overrides"] = _tuples(d["env_overrides"])
-            return cls(**d)
-        except (KeyError, TypeError) as e:
-            raise DpcError(f"Not a RunConfig ({e}); start a new run folder.") from e
-
-    def replace(self, **dotted: Any) -> RunConfig:
-        """A copy with overrides by dotted name: `arm='longer'`, `sac.num_envs=32`,
-        `adapter.epochs=20`, `env.push_force=(0, 60)`."""
-        top, sub = {}, {"adapter": {}, "sac": {}, "env": {}}
-        for key, value in dotted.items():
-            head, _, rest = key.partition(".")
-            if rest and head in sub:
-                sub[head][rest] = value
-            elif not rest and head in {f.name for f in dataclasses.fields(self)}:
-                top[key] = value
-            else:
-                raise DpcError(
-                    f"Unknown run option {key!r}; use a RunConfig field "
-                    f"({[f.name for f in dataclasses.fields(self)]}) or adapter.<field>, "
-                    "sac.<field>, env.<field>."
-                )
-        out = dataclasses.replace(self, **top)
-        try:
-            out = dataclasses.replace(
-                out,
-                adapter=dataclasses.replace(out.adapter, **sub["adapter"]),
-                sac=dataclasses.replace(out.sac, **sub["sac"]),
-                env_overrides={**out.env_overrides, **sub["env"]},
-            )
-        except TypeError as e:
-            raise DpcError(f"Unknown option in {sorted(dotted)}: {e}.") from e
-        out.validate()
-        return out
-
-
-def _tuples(d: dict) -> dict:
-    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+EPISODES_FILE = "eval_episodes.csv"  # the evaluation, one row per episode
 
 
 def train_and_evaluate(
@@ -163,32 +64,10 @@ def train_and_evaluate(
         "sac_grad_steps": result.history[-1]["grad_steps"] if result.history else 0,
         "sac_selected_epoch": result.selected_epoch,
         "timings_seconds": timings,
-        "eval": [dataclasses.asdict(c) for c in cells],
+        "eval": [c.summary() for c in cells],
     }
     write_json(run_dir / SUMMARY_FILE, summary)
     return summary
-
-
-def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
-    """The `RunConfig` a run folder was started with."""
-    path = pathlib.Path(run_dir) / CONFIG_FILE
-    return RunConfig.from_json(read_json(path, "run config", hint="is this a run folder?"))
-
-
-def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None:
-    """Write the run's config; when resuming, check that it is the one the folder holds."""
-    run_dir = pathlib.Path(run_dir)
-    path = run_dir / CONFIG_FILE
-    if resume:
-        saved = read_json(path, "run config", hint="start the run without --resume")
-        if saved != config.to_json():
-            raise DpcError(
-                f"{path} holds another configuration than this run's; resume with the same "
-                "options, or start a new run folder."
-            )
-    elif path.exists():
-        raise DpcError(f"{run_dir} already holds a run; resume it or pick another folder.")
-    write_json(path, config.to_json())
 
 
 def train_adapter(
@@ -339,11 +218,13 @@ def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[C
         dpc_policy_for=io.load(export_dir).dpc_policy,
         overrides=config.env_overrides,
         out=run_dir / "eval.md",
+        csv=run_dir / EPISODES_FILE,
     )
 
 
-def _evaluate_table(arms, controllers, *, out=None, **kwargs) -> list[CellResult]:
-    """`eval.evaluate`, printing the table row by row and writing it to `out` (markdown)."""
+def _evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[CellResult]:
+    """`eval.evaluate`, printing the table row by row, writing it to `out` (markdown) and every
+    episode to `csv` (`eval.write_episodes_csv`)."""
     print(TABLE_HEADER, flush=True)
 
     def show(cell: CellResult) -> None:
@@ -352,6 +233,8 @@ def _evaluate_table(arms, controllers, *, out=None, **kwargs) -> list[CellResult
     cells = evaluate(arms, controllers, on_result=show, **kwargs)
     if out is not None:
         pathlib.Path(out).write_text("\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n")
+    if csv is not None:
+        print(f"per-episode rows: {write_episodes_csv(csv, cells)}", flush=True)
     return cells
 
 
@@ -369,7 +252,7 @@ def env_overrides(artefacts: io.Artefacts) -> dict:
     """The env options an export was trained with (its sidecar's env_config), to evaluate and
     transfer under the same disturbances; the controller is chosen per use."""
     saved = artefacts.meta.get("env_config") or {}
-    return _tuples({k: v for k, v in saved.items() if k != "controller"})
+    return tuples({k: v for k, v in saved.items() if k != "controller"})
 
 
 def transfer_arm(
@@ -412,9 +295,11 @@ def evaluate_export(
     steps: int = 1000,
     seed: int = 1000,
     out: str | pathlib.Path | None = None,
+    csv: str | pathlib.Path | None = None,
 ) -> list[CellResult]:
     """The evaluation protocol for the arms of an export (default: every arm with an encoder),
-    under the env options it was trained with; prints the table (and writes it to `out`)."""
+    under the env options it was trained with; prints the table (and writes it to `out`, and
+    one row per episode to `csv`)."""
     artefacts = io.load(export_dir)
     arms = list(arms or sorted(artefacts.encoders))
     if "dpc" in controllers:
@@ -433,4 +318,5 @@ def evaluate_export(
         dpc_policy_for=artefacts.dpc_policy,
         overrides=overrides,
         out=out,
+        csv=csv,
     )

@@ -5,7 +5,8 @@ do. Used by the exports (`dpc_mjx.io`) and the training checkpoints (`sac.checkp
 
     write_msgpack(path, tree) -> sha256    flax serialization, atomic (temp file + os.replace)
     read_msgpack(path, template, what)     a tree like `template`; every leaf's path, shape and
-                                           dtype checked
+                                           dtype checked (= read_state, then restore, for a
+                                           caller that inspects the raw state in between)
     write_json(path, obj) / read_json(path, what)     atomic; invalid JSON is a `DpcError`
     write_bytes, replace_file, sha256_bytes, jsonable  the pieces a checkpoint protocol needs
 """
@@ -106,6 +107,13 @@ def read_msgpack(
     `sha256`, the file's bytes must also hash to it. Every failure (missing, unreadable, truncated,
     corrupt, mismatched) raises `DpcError` naming `what`, the file, and `hint` (what to do).
     """
+    data, state = read_state(path, what, hint=hint)
+    return restore(path, data, state, template, what, sha256=sha256, hint=hint)
+
+
+def read_state(path: str | pathlib.Path, what: str, *, hint: str) -> tuple[bytes, Any]:
+    """The bytes at `path` and the state dict they decode to (nested dicts of numpy arrays), to
+    inspect before `restore`; `DpcError` if missing, unreadable, truncated or corrupt."""
     path = pathlib.Path(path)
     if not path.is_file():
         raise DpcError(f"{path} ({what}) does not exist; {hint}.")
@@ -119,9 +127,22 @@ def read_msgpack(
         raise DpcError(
             f"{path} ({what}) is truncated or corrupt (msgpack: {type(e).__name__}: {e}); {hint}."
         ) from e
-    problems = _compare_specs(
-        _leaf_specs(serialization.to_state_dict(template)), _leaf_specs(state)
-    )
+    return data, state
+
+
+def restore(
+    path: str | pathlib.Path,
+    data: bytes,
+    state: Any,
+    template: Any,
+    what: str,
+    *,
+    sha256: str | None = None,
+    hint: str,
+) -> Any:
+    """`state` (read from `path` by `read_state`, with its bytes `data`) as a tree like
+    `template`, checked as `read_msgpack` describes."""
+    problems = _compare_specs(template_specs(template), _leaf_specs(state))
     if problems:
         raise DpcError(f"{path} ({what}) does not match: {_join(problems)}; {hint}.")
     if sha256 is not None and sha256_bytes(data) != sha256:
@@ -131,6 +152,16 @@ def read_msgpack(
         )
     tree = serialization.from_state_dict(template, state)
     return jax.tree.map(_like, template, tree)
+
+
+def template_specs(template: Any) -> dict[str, str]:
+    """{dotted leaf path: 'float32 (3, 4)'} of a tree (as its file's state dict would have)."""
+    return _leaf_specs(serialization.to_state_dict(template))
+
+
+def state_specs(state: Any) -> dict[str, str]:
+    """{dotted leaf path: 'float32 (3, 4)'} of a state dict from `read_state`."""
+    return _leaf_specs(state)
 
 
 def _like(t: Any, x: Any) -> Any:
@@ -185,10 +216,7 @@ def _compare_specs(expected: dict[str, str], found: dict[str, str]) -> list[str]
 
 def check_tree(tree: Any, template: Any, what: str, hint: str) -> None:
     """`DpcError` if `tree`'s leaves differ from `template`'s in path, shape or dtype."""
-    problems = _compare_specs(
-        _leaf_specs(serialization.to_state_dict(template)),
-        _leaf_specs(serialization.to_state_dict(tree)),
-    )
+    problems = _compare_specs(template_specs(template), template_specs(tree))
     if problems:
         raise DpcError(f"The {what} is inconsistent: {_join(problems)}. {hint}")
 

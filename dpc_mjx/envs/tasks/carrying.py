@@ -2,8 +2,9 @@
 body keeps steady; `carrying_high` uses 0.45 m tables (default arm `longer`), and the `double`
 arm carries two balls, one per arm.
 
-Scene (`props.task_spec`): source table at (0.55, 0.3) m (+y, left), target table at
-(0.55, -0.3) m, top surface 0.30 m (0.45 m high), one 0.1 kg ball per arm on the source table.
+Scene (`CarryingEnv.scene_spec(arm)`, `add_tables_and_balls`): source table at (0.55, 0.3) m
+(+y, left), target table at (0.55, -0.3) m, top surface 0.30 m (0.45 m high), one 0.1 kg ball
+per arm on the source table. Gripper arms only (`ArmSpec` with `ee_shape="gripper"`).
 The regular arm cannot reach the ball from the origin (0.47 m from the shoulder, 0.42 m reach),
 so the robot starts `robot_x` = 0.15 m closer to the tables (its feet do not touch them).
 
@@ -19,9 +20,10 @@ the jaws), gripper pitched about 45 deg down, robot standing level at `scripts.S
 ball k goes from its place on the source table to the same place on the target table
 (translated by -0.6 m in y), so the two arms of `double` never cross.
 
-Grasp: a weld, not friction (see `props`). During the close move and its hold, weld k switches
-on as soon as the grasp site is within `grasp_threshold` of ball k (`props.grasp_gaps`), and stays
-on until the release move starts (`task_physics`, every physics step, via `props.set_welds`).
+Grasp: a weld, not friction (see `robots.objects`). During the close move and its hold, weld k
+switches on as soon as the grasp site is within `grasp_threshold` of ball k
+(`objects.grasp_gaps`), and stays on until the release move starts (`task_physics`, every
+physics step, via `objects.set_welds`).
 
 Metrics: `ball_target_dist` (m, mean over balls of ball centre to its rest point on the target
 table), `ball_on_target` (fraction of balls resting on the target table, weld off), `grasped`
@@ -37,14 +39,24 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 
-from dpc_mjx.envs import scripts
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig, _number, _positive
 from dpc_mjx.envs.disturbances import NEVER
-from dpc_mjx.robots import props
+from dpc_mjx.envs.tasks import scripts
+from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import objects
 from dpc_mjx.robots.assemble import HOME_KEY
-from dpc_mjx.robots.variants import Arm, RobotSpec
+from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
+# Scene (m, kg): a ball from the source table (left, +y) to the target table (right, -y).
+TABLE_HEIGHT = 0.3  # top surface above the floor
+TABLE_HEIGHT_HIGH = 0.45  # `carrying_high`, for the longer arm
+TABLE_HALF = (0.15, 0.15)  # top, half extents in x, y
+TABLE_POS = ((0.55, 0.3), (0.55, -0.3))  # source, target: top centres, world x, y
+BALL_MASS = 0.1  # kg, per ball
+BALL_EDGE_INSET = 0.05  # ball centre from the source table's near (-x) edge
+BALL_SPACING = 0.12  # between two balls along y (the double arm's mounts are 0.12 apart)
+# Script:
 APPROACH_HEIGHT = 0.06  # m, grasp site above the ball before grasping and after releasing
 LIFT_HEIGHT = 0.10  # m, ball above its rest height while carried
 PLACE_CLEARANCE = 0.01  # m, ball above its rest height when released
@@ -91,6 +103,8 @@ class CarryingEnv(DpcEnv):
     """Carrying: see the module doc."""
 
     TASK = "carrying"
+    DEFAULT_ARM = "regular"
+    TABLE_HEIGHT = TABLE_HEIGHT  # m, top surface above the floor (the module's 0.3)
 
     def __init__(self, config: CarryingConfig, arm: str | Arm | RobotSpec | None = None):
         super().__init__(config, arm)
@@ -110,8 +124,8 @@ class CarryingEnv(DpcEnv):
         self.t_lift = float(self.script.start[_LIFT])
         self.t_release = float(self.script.start[_RELEASE])
         self._ball_qpos = np.array([b.qpos[:3] for b in p.balls])  # (k, 3)
-        self._target_lo = p.table_tops[1, :2] - props.TABLE_HALF  # (2,) m, target top, x-y box
-        self._target_hi = p.table_tops[1, :2] + props.TABLE_HALF
+        self._target_lo = p.table_tops[1, :2] - TABLE_HALF  # (2,) m, target top, x-y box
+        self._target_hi = p.table_tops[1, :2] + TABLE_HALF
 
     def _waypoints(self, data, k: int, ball: np.ndarray, place: np.ndarray) -> list[np.ndarray]:
         """Servo targets of arm k at the 8 waypoints between home and home (see the module doc)."""
@@ -141,8 +155,21 @@ class CarryingEnv(DpcEnv):
             retreat,
         ]
 
+    @classmethod
+    def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
+        """The robot (`arm`; None: `DEFAULT_ARM`) at the origin, the tables `TABLE_HEIGHT` high,
+        ball k on the source table and weld k (off) from it to arm k's grasp site."""
+        robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
+        spec = objects.robot_scene(robot, cls.TASK)
+        offsets = [objects.grasp_offset(a, robot.name, cls.TASK) for a in robot.arms]
+        add_tables_and_balls(spec, cls.TABLE_HEIGHT, n_balls=len(robot.arms))
+        for i, off in enumerate(offsets):
+            objects.add_grasp(spec, f"ball{i}", i, off, active=False)
+        return spec
+
     def build_model(self, arm: str | Arm | RobotSpec | None) -> mujoco.MjModel:
-        spec = props.task_spec(self.TASK, arm)
+        """`scene_spec(arm)` with the trunk at x = `config.robot_x` in the home key."""
+        spec = self.scene_spec(arm)
         key = spec.key(HOME_KEY)
         qpos = list(key.qpos)
         qpos[0] = self.config.robot_x  # the trunk's x
@@ -158,10 +185,10 @@ class CarryingEnv(DpcEnv):
         return self.script.targets(t)
 
     def task_physics(self, d, t: jax.Array):
-        gaps = props.grasp_gaps(d, self.props)  # (k,) m
+        gaps = objects.grasp_gaps(d, self.props)  # (k,) m
         window = (t >= self.t_close) & (t < self.t_lift)
         held = d.eq_active[self.props.welds] | (window & (gaps < self.config.grasp_threshold))
-        return props.set_welds(d, self.props, held & (t < self.t_release))
+        return objects.set_welds(d, self.props, held & (t < self.t_release))
 
     def task_metrics(self, d) -> dict[str, jax.Array]:
         balls = d.qpos[self._ball_qpos]  # (k, 3) m
@@ -176,6 +203,28 @@ class CarryingEnv(DpcEnv):
 
 
 class CarryingHighEnv(CarryingEnv):
-    """Carrying between 0.45 m tables (`props.TABLE_HEIGHT_HIGH`); default arm `longer`."""
+    """Carrying between 0.45 m tables (`TABLE_HEIGHT_HIGH`); default arm `longer`."""
 
     TASK = "carrying_high"
+    DEFAULT_ARM = "longer"
+    TABLE_HEIGHT = TABLE_HEIGHT_HIGH
+
+
+def add_tables_and_balls(
+    spec: mujoco.MjSpec,
+    table_height: float = TABLE_HEIGHT,
+    n_balls: int = 1,
+    ball_mass: float = BALL_MASS,
+    table_pos: tuple[tuple[float, float], ...] = TABLE_POS,
+) -> mujoco.MjSpec:
+    """Source and target tables (`table0`, `table1`) and `n_balls` (1 or 2) balls on the source."""
+    if n_balls not in (1, 2):
+        raise DpcError(f"n_balls must be 1 or 2 (one per arm), got {n_balls}.")
+    for i, xy in enumerate(table_pos):
+        objects.add_table(spec, xy, table_height, TABLE_HALF, name=f"table{i}")
+    x = table_pos[0][0] - TABLE_HALF[0] + BALL_EDGE_INSET
+    for k in range(n_balls):
+        y = table_pos[0][1] + (0.5 - k) * BALL_SPACING * (n_balls - 1)  # ball k near arm k
+        pos = (x, y, table_height + objects.BALL_RADIUS)
+        objects.add_ball(spec, pos, ball_mass, name=f"ball{k}")
+    return spec

@@ -1,8 +1,8 @@
 """The ball-lifting task (paper §IV, Fig. "ball lifting"): walk a desired trajectory while the arm
 lifts a 0.3 kg ball up and down.
 
-Scene (`props.task_spec("lifting", arm)`): one 0.3 kg ball per arm, welded between the jaws from
-the start (the weld stays on; the finger is shut on it).
+Scene (`LiftingEnv.scene_spec(arm)`): one 0.3 kg ball (`BALL_MASS`) per arm, welded between the
+jaws from the start (the weld stays on; the finger is shut on it). Gripper arms only.
 
 Script: the body walks at v_x 0.3 m/s, and at `command_switch` = 10 s starts turning at 0.3 rad/s
 (`command_after`), so the desired trajectory is a straight line then an arc. The arm repeats
@@ -24,13 +24,15 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 
-from dpc_mjx.envs import scripts
 from dpc_mjx.envs.base import DpcEnv
-from dpc_mjx.envs.carrying import FINGER_CLOSED
 from dpc_mjx.envs.config import EnvConfig, _number, _positive
-from dpc_mjx.robots import props
-from dpc_mjx.robots.variants import Arm, RobotSpec
+from dpc_mjx.envs.tasks import scripts
+from dpc_mjx.envs.tasks.carrying import FINGER_CLOSED
+from dpc_mjx.robots import objects
+from dpc_mjx.robots.assemble import arm_prefix
+from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
+BALL_MASS = 0.3  # kg, the paper's ball
 RAISE = np.array([-0.06, 0.0, 0.12])  # m, grasp site raised pose minus home pose
 
 
@@ -63,6 +65,7 @@ class LiftingEnv(DpcEnv):
     """Lifting: see the module doc."""
 
     TASK = "lifting"
+    DEFAULT_ARM = "regular"
 
     def __init__(self, config: LiftingConfig, arm: str | Arm | RobotSpec | None = None):
         super().__init__(config, arm)
@@ -83,8 +86,23 @@ class LiftingEnv(DpcEnv):
         )
         self.period = 2 * (config.move_time + config.hold_time)  # s
 
+    @classmethod
+    def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
+        """The robot (`arm`; None: `DEFAULT_ARM`), ball k centred on arm k's grasp site in the
+        home key (oriented with it) and weld k on."""
+        robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
+        spec = objects.robot_scene(robot, cls.TASK)
+        n = len(robot.arms)
+        for i, arm_ in enumerate(robot.arms):
+            objects.add_grasp_site(spec, i, objects.grasp_offset(arm_, robot.name, cls.TASK))
+        pos, quat = objects.home_site_poses(spec, [arm_prefix(i) + "grasp" for i in range(n)])
+        for i in range(n):
+            objects.add_ball(spec, pos[i], BALL_MASS, name=f"ball{i}", quat=quat[i])
+            objects.add_weld(spec, f"ball{i}", i, active=True)
+        return spec
+
     def build_model(self, arm: str | Arm | RobotSpec | None) -> mujoco.MjModel:
-        return props.task_spec(self.TASK, arm).compile()
+        return self.scene_spec(arm).compile()
 
     @classmethod
     def check_arm(cls, robot: RobotSpec) -> None:
@@ -95,4 +113,4 @@ class LiftingEnv(DpcEnv):
         return self.script.targets(jp.mod(t, self.period))
 
     def task_metrics(self, d) -> dict[str, jax.Array]:
-        return {"ball_gap": jp.max(props.grasp_gaps(d, self.props))}
+        return {"ball_gap": jp.max(objects.grasp_gaps(d, self.props))}

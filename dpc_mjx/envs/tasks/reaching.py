@@ -30,8 +30,12 @@ most; the shoulder servo's 20 N·m limit is reached near full reach). At 20 s ep
 
 from __future__ import annotations
 
+import mujoco
+
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
+from dpc_mjx.robots.assemble import build_spec
+from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 
 def default_config() -> EnvConfig:
@@ -42,4 +46,16 @@ def default_config() -> EnvConfig:
 
 class ReachingEnv(DpcEnv):
     """Reaching: the arm's reference motion and end-effector pushes are the disturbances; the
-    scene is the robot on a floor (`DpcEnv.build_model`)."""
+    scene is the robot on a floor (`DpcEnv.build_model`). Every arm, or none, can reach."""
+
+    TASK = "reaching"
+    DEFAULT_ARM = "regular"
+
+    @classmethod
+    def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
+        """The robot on a floor, named `a1_<variant>_reaching` (the env itself compiles
+        `robots.build(arm)`, named `a1_<variant>`)."""
+        robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
+        spec = build_spec(robot)
+        spec.modelname = f"a1_{robot.name}_{cls.TASK}"
+        return spec

@@ -7,15 +7,15 @@ from __future__ import annotations
 import dataclasses
 import time
 
-import jax
 import numpy as np
 
 from dpc_mjx import sim
+from dpc_mjx.control.state import has_fallen
 from dpc_mjx.robots import VARIANTS, build, resolve
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
-
-_STOOD_HEIGHT = 0.18  # m: a trunk below this has fallen
+from dpc_mjx.rotations import roll_pitch_yaw
+from dpc_mjx.run.bench import time_calls
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,7 +26,7 @@ class DemoRow:
     total_mass: float  # kg
     compile_s: float
     steps_per_s: float  # MJX env-steps/s after compilation
-    stood: int  # envs whose trunk stayed above _STOOD_HEIGHT
+    stood: int  # envs that did not fall (`control.state.has_fallen`)
 
 
 def stand_variant(name: str, batch: int = 16, seconds: float = 1.0, chunk: int = 50) -> DemoRow:
@@ -36,24 +36,18 @@ def stand_variant(name: str, batch: int = 16, seconds: float = 1.0, chunk: int =
     mx = sim.put_model(model)
     data = sim.batched_data(mx, perturbed_home(model, batch), np.tile(home_ctrl(model), (batch, 1)))
     rollout = sim.make_rollout(mx, chunk)
-    t0 = time.perf_counter()
-    data = jax.block_until_ready(rollout(data))
-    compile_s = time.perf_counter() - t0
     n_calls = max(1, round(seconds / model.opt.timestep / chunk) - 1)
-    t0 = time.perf_counter()
-    for _ in range(n_calls):
-        data = rollout(data)
-    jax.block_until_ready(data)
-    run_s = time.perf_counter() - t0
+    compile_s, call_s, data = time_calls(rollout, data, n_calls)
     arm_bodies = np.concatenate([a.bodies for a in lay.arms]) if lay.arms else np.zeros(0, int)
+    fallen = has_fallen(data.qpos[:, 2], roll_pitch_yaw(data.qpos[:, 3:7])[:, :2])
     return DemoRow(
         variant=name,
         arm_dof=int(lay.arm_dof.size),
         arm_mass=float(model.body_mass[arm_bodies].sum()),
         total_mass=float(model.body_mass.sum()),
         compile_s=compile_s,
-        steps_per_s=batch * chunk * n_calls / run_s,
-        stood=int((np.asarray(data.qpos[:, 2]) > _STOOD_HEIGHT).sum()),
+        steps_per_s=batch * chunk / call_s,
+        stood=int((~np.asarray(fallen)).sum()),
     )
 
 
@@ -120,7 +114,8 @@ def run_demo(quick: bool = False, run_dir: str | None = None) -> dict:
     import datetime
     import pathlib
 
-    from dpc_mjx.pipeline import RunConfig, train_and_evaluate
+    from dpc_mjx.run.config import RunConfig
+    from dpc_mjx.run.pipeline import train_and_evaluate
 
     config = RunConfig().replace(**(QUICK if quick else DEMO))
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")

@@ -1,5 +1,6 @@
-"""Task scenes: objects compile, rest where they should, touch only what they should; the weld
-carries a ball in MJX, and a welded ball weighs on the mount sensor (MuJoCo C, one MJX check)."""
+"""Objects in the task scenes (`robots.objects`, placed by `envs.tasks`): they compile, rest where
+they should, touch only what they should; the weld carries a ball in MJX, and a welded ball weighs
+on the mount sensor (MuJoCo C, one MJX check)."""
 
 import itertools
 
@@ -12,7 +13,9 @@ from mujoco import mjx
 from mujoco.mjx._src import collision_driver
 
 from dpc_mjx import DpcError, sim
-from dpc_mjx.robots import VARIANTS, ArmSpec, build, props
+from dpc_mjx.envs import registry
+from dpc_mjx.envs.tasks import carrying, lifting
+from dpc_mjx.robots import VARIANTS, ArmSpec, build, objects
 from dpc_mjx.robots.layout import layout, mount_wrench
 from dpc_mjx.robots.standing import home_ctrl, with_leg_servos
 
@@ -30,10 +33,15 @@ _LIFT_RTOL = 1e-2  # mount force change vs the ball's weight
 _G = 9.81
 
 
+def _build(task: str, arm: str | None = None) -> mujoco.MjModel:
+    """Task `task`'s scene alone (robot at the origin), as its module builds it."""
+    return registry.build_scene(f"{registry.ROBOT}/{task}", arm)
+
+
 @pytest.fixture(scope="module", params=_SCENES, ids="-".join)
 def scene(request):
     task, arm = request.param
-    return task, arm, props.build_task_scene(task, arm)
+    return task, arm, _build(task, arm)
 
 
 def _settle(model: mujoco.MjModel, seconds: float, tail: int = 50):
@@ -54,7 +62,7 @@ def _settle(model: mujoco.MjModel, seconds: float, tail: int = 50):
 
 def test_scene_compiles_and_loads_into_mjx(scene):
     task, arm, model = scene
-    lay, p = layout(model), props.prop_layout(model)
+    lay, p = layout(model), objects.prop_layout(model)
     assert len(lay.arms) == len(VARIANTS[arm].arms)
     n_balls = {"pushing": 0, "reaching": 0}.get(task, len(lay.arms))
     assert len(p.balls) == len(p.welds) == len(p.grasp_sites) == n_balls
@@ -70,8 +78,8 @@ def test_scene_compiles_and_loads_into_mjx(scene):
 
 def test_object_rests_on_its_support():
     for task, arm, support in (("pushing", "pusher", 0.0), ("carrying", "regular", 0.3)):
-        model = with_leg_servos(props.build_task_scene(task, arm))
-        p = props.prop_layout(model)
+        model = with_leg_servos(_build(task, arm))
+        p = objects.prop_layout(model)
         data, _ = _settle(model, 1.0)
         for obj in p.objects:
             half = model.geom_size[obj.geom][2 if obj is p.box else 0]
@@ -120,7 +128,7 @@ def test_contact_pairs_are_exactly_the_intended_ones(scene):
     task, _, model = scene
     by_masks = {tuple(sorted((_label(model, a), _label(model, b)))) for a, b in _mask_pairs(model)}
     assert by_masks == _expected_pairs(task, model)
-    n_balls = len(props.prop_layout(model).balls)
+    n_balls = len(objects.prop_layout(model).balls)
     n_expected = {"pushing": 4 + 1 + 1, "lifting": 4 + n_balls}.get(task, 4 + 3 * n_balls)
     assert len(by_masks) == n_expected  # feet; box: floor, plate; balls: floor (+ 2 tables)
     # MJX's own list of geom pairs to collide agrees with the masks.
@@ -129,7 +137,7 @@ def test_contact_pairs_are_exactly_the_intended_ones(scene):
 
 
 def test_regular_gripper_touches_the_box_with_its_three_boxes():
-    model = props.build_task_scene("pushing", "regular")
+    model = _build("pushing", "regular")
     box, floor = model.geom("box").id, model.geom("floor").id
     others = [a + b - box for a, b in _mask_pairs(model) if box in (a, b)]
     names = sorted(model.body(model.geom_bodyid[g]).name for g in others if g != floor)
@@ -139,8 +147,8 @@ def test_regular_gripper_touches_the_box_with_its_three_boxes():
 def test_mjx_weld_switched_on_in_jit_carries_the_ball():
     """Env 0: ball put at the grasp site, weld switched on inside the jitted step, robot crouches
     (the gripper drops ~10 cm): the ball follows. Env 1: weld off, the ball stays on the table."""
-    model = with_leg_servos(props.build_task_scene("carrying", "regular"))
-    p, lay = props.prop_layout(model), layout(model)
+    model = with_leg_servos(_build("carrying", "regular"))
+    p, lay = objects.prop_layout(model), layout(model)
     ball = p.balls[0]
     home = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, home, 0)
@@ -156,9 +164,9 @@ def test_mjx_weld_switched_on_in_jit_carries_the_ball():
     @jax.jit
     def run(d, active):
         def one(d, a):
-            d = props.set_welds(d, p, a)  # in the jitted function, as an env step would
+            d = objects.set_welds(d, p, a)  # in the jitted function, as an env step would
             d = jax.lax.scan(lambda d, _: (mjx.step(mx, d), None), d, None, length=100)[0]
-            return d, props.grasp_gaps(d, p)
+            return d, objects.grasp_gaps(d, p)
 
         return jax.vmap(one)(d, active)
 
@@ -173,17 +181,17 @@ def test_mjx_weld_switched_on_in_jit_carries_the_ball():
     assert home.site_xpos[p.grasp_sites[0], 2] - grasp[2] > 0.05  # the gripper moved down
     assert (gaps[0] < _WELD_GAP_TOL).all(), gaps[0]
     z = np.asarray(data.qpos[:, ball.qpos[2]])
-    assert z[1] == pytest.approx(props.TABLE_HEIGHT + props.BALL_RADIUS, abs=_REST_TOL)
+    assert z[1] == pytest.approx(carrying.TABLE_HEIGHT + objects.BALL_RADIUS, abs=_REST_TOL)
     assert np.isfinite(np.asarray(data.qpos)).all()
 
 
 @pytest.mark.parametrize("arm", ["regular", "double"])
 def test_welded_ball_weighs_on_the_mount_sensor(arm):
-    with_ball = with_leg_servos(props.build_task_scene("lifting", arm))
-    p = props.prop_layout(with_ball)
+    with_ball = with_leg_servos(_build("lifting", arm))
+    p = objects.prop_layout(with_ball)
     data, fz = _settle(with_ball, 1.5)
     _, fz0 = _settle(with_leg_servos(build(arm)), 1.5)
-    ball_weight = props.LIFT_BALL_MASS * _G * len(p.balls)
+    ball_weight = lifting.BALL_MASS * _G * len(p.balls)
     assert fz - fz0 == pytest.approx(ball_weight, rel=_LIFT_RTOL)
     gaps = np.linalg.norm(data.site_xpos[p.grasp_sites] - data.site_xpos[p.ball_sites], axis=1)
     assert (gaps < _WELD_GAP_TOL).all()
@@ -200,12 +208,12 @@ def test_pusher_has_a_heavy_plate_and_four_joints():
 
 def test_unknown_task_and_bad_pairings_raise():
     with pytest.raises(DpcError, match="known tasks: .*carrying"):
-        props.build_task_scene("juggling")
+        _build("juggling")
     with pytest.raises(DpcError, match="gripper arm"):
-        props.build_task_scene("carrying", "pusher")
+        _build("carrying", "pusher")
     with pytest.raises(DpcError, match="needs an arm"):
-        props.build_task_scene("pushing", "none")
+        _build("pushing", "none")
     with pytest.raises(DpcError, match="ee_shape"):
         build(ArmSpec(ee_shape="spoon"))
     with pytest.raises(DpcError, match="n_balls"):
-        props.add_tables_and_balls(mujoco.MjSpec(), n_balls=3)
+        carrying.add_tables_and_balls(mujoco.MjSpec(), n_balls=3)

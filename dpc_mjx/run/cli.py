@@ -40,7 +40,7 @@ def _parse_sets(items: list[str]) -> dict:
 
 
 def _run_config(args: argparse.Namespace):
-    from dpc_mjx.pipeline import RunConfig
+    from dpc_mjx.run.config import RunConfig
 
     named = {k: getattr(args, k) for k in ("arm", "samples", "task") if getattr(args, k, None)}
     if getattr(args, "timesteps", None):
@@ -51,7 +51,8 @@ def _run_config(args: argparse.Namespace):
 
 
 def _train(args: argparse.Namespace) -> None:
-    from dpc_mjx.pipeline import read_run_config, train_and_evaluate
+    from dpc_mjx.run.config import read_run_config
+    from dpc_mjx.run.pipeline import train_and_evaluate
 
     run = pathlib.Path(args.run)
     config = read_run_config(run) if args.resume and not args.set else _run_config(args)
@@ -60,7 +61,8 @@ def _train(args: argparse.Namespace) -> None:
 
 
 def _train_adapter(args: argparse.Namespace) -> None:
-    from dpc_mjx.pipeline import start_run, train_adapter
+    from dpc_mjx.run.config import start_run
+    from dpc_mjx.run.pipeline import train_adapter
 
     run = pathlib.Path(args.run)
     config = _run_config(args)
@@ -70,13 +72,13 @@ def _train_adapter(args: argparse.Namespace) -> None:
 
 
 def _transfer(args: argparse.Namespace) -> None:
-    from dpc_mjx.pipeline import transfer_arm
+    from dpc_mjx.run.pipeline import transfer_arm
 
     transfer_arm(args.export, args.arm, samples=args.samples, task=args.task, seed=args.seed)
 
 
 def _eval(args: argparse.Namespace) -> None:
-    from dpc_mjx.pipeline import SHIPPED, evaluate_export
+    from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
 
     evaluate_export(
         args.export or SHIPPED,
@@ -87,30 +89,38 @@ def _eval(args: argparse.Namespace) -> None:
         steps=args.steps,
         seed=args.seed,
         out=args.out,
+        csv=args.csv or _default_csv(args),
     )
 
 
+def _default_csv(args: argparse.Namespace) -> pathlib.Path:
+    """Beside `--out` (same name, .csv), else runs/eval/<task>-seed<seed>.csv."""
+    if args.out:
+        return pathlib.Path(args.out).with_suffix(".csv")
+    return pathlib.Path("runs", "eval", f"{args.task.replace('/', '-')}-seed{args.seed}.csv")
+
+
 def _export(args: argparse.Namespace) -> None:
-    from dpc_mjx.pipeline import export_run
+    from dpc_mjx.run.pipeline import export_run
 
     print(f"exported to {export_run(args.run, args.out)}")
 
 
 def _bench(args: argparse.Namespace) -> None:
-    from dpc_mjx.bench import print_table
+    from dpc_mjx.run.bench import print_table
 
     print_table(args.arm, args.batches, args.calls)
 
 
 def _demo(args: argparse.Namespace) -> None:
-    from dpc_mjx.demo import run_demo
+    from dpc_mjx.run.demo import run_demo
 
     run_demo(quick=args.quick)
 
 
 def _variants(args: argparse.Namespace) -> None:
-    from dpc_mjx.demo import run_variants
     from dpc_mjx.robots import VARIANTS
+    from dpc_mjx.run.demo import run_variants
 
     run_variants(args.variants or tuple(VARIANTS), batch=args.batch, seconds=args.seconds)
 
@@ -170,6 +180,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
     p.add_argument("--seed", type=int, default=1000)
     p.add_argument("--out", help="also write the table to this markdown file")
+    p.add_argument(
+        "--csv",
+        help="one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)",
+    )
     p.set_defaults(handler=_eval)
 
     p = sub.add_parser("export", help="export a run's adapter and policy")

@@ -9,23 +9,27 @@ the fall penalty included. Reported per cell: fall rate with a 95% Wilson interv
 with a 95% normal interval, RMS roll and pitch (rad), RMSE of forward and lateral speed (m/s) and
 of the yaw rate (rad/s) over the steps before a fall, NaN resets, wall time.
 
-Controllers: 'mbc' (u = 0), 'oracle' (u = the measured arm-mount wrench) and 'dpc' (u from the
-trained policy acting on `[s_body, z]`, z from the arm's own encoder).
+Controllers: 'mbc' (u = 0), 'observer' (u = the momentum observer's estimate, no training, no
+force sensor), 'oracle' (u = the measured arm-mount wrench) and 'dpc' (u from the trained policy
+acting on `[s_body, z]`, z from the arm's own encoder).
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import pathlib
 import time
 from collections.abc import Callable
 
 import numpy as np
 
-from dpc_mjx.envs.episodes import Policy, mean_ci, run_episodes, wilson_ci
 from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.rollout import Policy, run_episodes
 from dpc_mjx.errors import DpcError
+from dpc_mjx.run.stats import mean_ci, wilson_ci
 
-CONTROLLERS = ("mbc", "dpc", "oracle")
+CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,10 +51,17 @@ class CellResult:
     yaw_rate_rmse: float  # rad/s
     nan_resets: int
     seconds: float  # wall time, compile included
+    seed: int = 0  # episode i is reset from the i-th key of `seed` (`rollout.start`)
+    # per-episode arrays of `rollout.run_episodes` (episodes,), for `write_episodes_csv`
+    per_episode: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
     @property
     def fall_rate(self) -> float:
         return self.falls / self.episodes
+
+    def summary(self) -> dict:
+        """The cell's figures as JSON-able values (without the per-episode arrays)."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if k != "per_episode"}
 
 
 def evaluate_env(
@@ -92,6 +103,8 @@ def evaluate_env(
         yaw_rate_rmse=rms("yaw_rate_sq_err"),
         nan_resets=int(r["nan"].sum()),
         seconds=seconds,
+        seed=seed,
+        per_episode=r,
     )
 
 
@@ -146,3 +159,54 @@ def table_row(c: CellResult) -> str:
         f" | {c.roll_rms:.3f} | {c.pitch_rms:.3f} | {c.vx_rmse:.3f} | {c.yaw_rate_rmse:.3f}"
         f" | {c.nan_resets} | {c.seconds:.0f} |"
     )
+
+
+EPISODE_COLUMNS = (
+    *("arm", "controller", "seed", "episode", "fell", "fall_step", "nan_reset", "length"),
+    *("return", "roll_rms", "pitch_rms", "vx_rmse", "vy_rmse", "yaw_rate_rmse"),
+)
+
+
+def episode_rows(c: CellResult) -> list[dict]:
+    """One row per episode of a cell (`EPISODE_COLUMNS`): `episode` i was reset from the i-th
+    key of `seed`, so rows with the same (seed, episode) are the same episode under every
+    controller (pair them); `fall_step` is the env step (1-based) of the fall, empty if none;
+    RMS errors (rad, m/s, rad/s) over the steps before the episode's end."""
+    r = c.per_episode
+    measured = np.maximum(r["measured"], 1.0)
+
+    def rms(key: str, i: int) -> float:
+        return float(np.sqrt(r[key][i] / measured[i]))
+
+    return [
+        {
+            "arm": c.arm,
+            "controller": c.controller,
+            "seed": c.seed,
+            "episode": i,
+            "fell": int(r["fell"][i]),
+            "fall_step": int(r["length"][i]) if r["fell"][i] else "",
+            "nan_reset": int(r["nan"][i]),
+            "length": int(r["length"][i]),
+            "return": float(r["return"][i]),
+            "roll_rms": rms("roll_sq", i),
+            "pitch_rms": rms("pitch_sq", i),
+            "vx_rmse": rms("vx_sq_err", i),
+            "vy_rmse": rms("vy_sq_err", i),
+            "yaw_rate_rmse": rms("yaw_rate_sq_err", i),
+        }
+        for i in range(len(r["return"]))
+    ]
+
+
+def write_episodes_csv(path: str | pathlib.Path, cells: list[CellResult]) -> pathlib.Path:
+    """Every episode of `cells` as a CSV row (`episode_rows`), to re-analyse, pair or bootstrap a
+    table without re-running it."""
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(EPISODE_COLUMNS))
+        w.writeheader()
+        for c in cells:
+            w.writerows(episode_rows(c))
+    return path

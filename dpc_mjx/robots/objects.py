@@ -1,7 +1,9 @@
-"""Task scenes: the boxes, tables and balls of the pushing, carrying and lifting tasks (paper §IV).
+"""Objects for scenes around the robot: free boxes and balls, static tables, weld grasps, and the
+object indices (`prop_layout`) the envs close over. It knows no tasks: each task
+(`dpc_mjx.envs.tasks`) places these objects with its own sizes, masses and positions.
 
-The robot stands at the origin facing +x (home pose). Builders edit a scene spec from
-`assemble.build_spec` in place and return it; `build_task_scene(task, arm)` compiles one task.
+The robot stands at the origin facing +x (home pose). Builders edit a scene spec (from
+`robot_scene` or `assemble.build_spec`) in place and return it.
 
 Objects are real MJX bodies. Contacts stay sparse with these bit masks (a pair collides if
 `contype1 & conaffinity2` or `contype2 & conaffinity1`):
@@ -18,8 +20,8 @@ Objects are real MJX bodies. Contacts stay sparse with these bit masks (a pair c
 
 Balls are carried by a weld equality (grasp site of arm k <-> centre of ball k), not by
 friction in the gripper: the gripper does not touch balls, so switching the weld on near a ball
-pulls it into the jaws without a fight against contact forces. Carrying starts with the welds off
-(`data.eq_active`, see `set_welds`); lifting starts with the 0.3 kg ball welded in the gripper.
+pulls it into the jaws without a fight against contact forces. A weld starts off or on
+(`add_weld(active=...)`); envs switch it in `data.eq_active` with `set_welds`.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import numpy as np
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import a1, arms
 from dpc_mjx.robots.assemble import arm_prefix, build_spec
-from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
+from dpc_mjx.robots.variants import Arm, RobotSpec
 
 # Contact bits (see the table above).
 FLOOR_BIT, EE_BIT, TABLE_BIT = a1.FLOOR_CONTYPE, 2, 4
@@ -42,46 +44,38 @@ BALL_CONTYPE, BALL_CONAFFINITY = 0, FLOOR_BIT | TABLE_BIT
 TABLE_CONTYPE, TABLE_CONAFFINITY = TABLE_BIT, 0
 EE_CONTYPE, EE_CONAFFINITY = 0, EE_BIT
 
-# Defaults (m, kg). Pushing: a light 0.2 m cardboard box 0.7 m ahead of the trunk.
-BOX_HALF = (0.1, 0.1, 0.1)
-BOX_MASS = 1.0
-BOX_POS = (0.7, 0.0)  # on the floor, world x, y
-BOX_FRICTION = 0.5  # box-floor and box-plate (the box has contact priority)
-# Carrying: ball from the source table (left, +y) to the target table (right, -y).
-TABLE_HEIGHT = 0.3  # top surface above the floor
-TABLE_HEIGHT_HIGH = 0.45  # `carrying_high`, for the longer arm
-TABLE_HALF = (0.15, 0.15)  # top, half extents in x, y
-TABLE_THICKNESS = 0.02
-TABLE_POS = ((0.55, 0.3), (0.55, -0.3))  # source, target: top centres, world x, y
+# Defaults that come from the gripper or the builders, not from a task (m).
 BALL_RADIUS = 0.02  # fits between the open jaws (0.044 m apart)
-BALL_MASS = 0.1  # carrying
-LIFT_BALL_MASS = 0.3  # lifting (the paper's 0.3 kg ball)
-BALL_EDGE_INSET = 0.05  # ball centre from the source table's near (-x) edge
-BALL_SPACING = 0.12  # between two balls along y (the double arm's mounts are 0.12 apart)
-GRASP_OFFSET = (-arms.FINGER_LENGTH / 2, 0.0, 0.0)  # ee-body frame, from the ee site: mid-jaw
 BALL_FRICTION = (0.8, 0.005, 0.0005)  # sliding, torsional, rolling (condim 6: balls stop rolling)
+GRASP_OFFSET = (-arms.FINGER_LENGTH / 2, 0.0, 0.0)  # ee-body frame, from the ee site: mid-jaw
+TABLE_THICKNESS = 0.02  # of a table's top
 
 _BOX_RGBA, _TABLE_RGBA, _BALL_RGBA = [0.7, 0.5, 0.3, 1], [0.55, 0.45, 0.35, 1], [0.9, 0.2, 0.2, 1]
 
-TASK_ARMS = {  # task -> default arm variant
-    "reaching": "regular",
-    "pushing": "pusher",
-    "carrying": "regular",
-    "carrying_high": "longer",
-    "lifting": "regular",
-}
-TASKS = tuple(TASK_ARMS)
+
+def robot_scene(robot: RobotSpec, scene: str) -> mujoco.MjSpec:
+    """The spec of `robot` on the floor, named `a1_<variant>_<scene>`, with every end effector
+    touching boxes (`enable_ee_contacts`); raises `DpcError` if `robot` has no arm."""
+    spec = build_spec(robot)
+    spec.modelname = f"a1_{robot.name}_{scene}"
+    if not robot.arms:
+        raise DpcError(f"Task {scene!r} needs an arm; variant {robot.name!r} has none.")
+    for i in range(len(robot.arms)):
+        enable_ee_contacts(spec, i)
+    return spec
 
 
 def add_box(
     spec: mujoco.MjSpec,
-    pos: tuple[float, float] = BOX_POS,
-    half: tuple[float, float, float] = BOX_HALF,
-    mass: float = BOX_MASS,
-    friction: float = BOX_FRICTION,
+    pos: tuple[float, float],
+    half: tuple[float, float, float],
+    mass: float,
+    friction: float,
     name: str = "box",
 ) -> mujoco.MjSpec:
-    """A free box resting on the floor at world (x, y) = `pos`; returns `spec`."""
+    """A free box of half extents `half` (m) and `mass` (kg) resting on the floor at world
+    (x, y) = `pos`; its sliding `friction` wins against the floor's and the plate's. Returns
+    `spec`."""
     body = spec.worldbody.add_body(name=name, pos=[pos[0], pos[1], half[2]])
     body.add_freejoint(name=name)
     body.add_geom(
@@ -102,11 +96,12 @@ def add_box(
 def add_table(
     spec: mujoco.MjSpec,
     pos: tuple[float, float],
-    height: float = TABLE_HEIGHT,
-    half: tuple[float, float] = TABLE_HALF,
+    height: float,
+    half: tuple[float, float],
     name: str = "table0",
 ) -> mujoco.MjSpec:
-    """A static table: a colliding top whose surface is at `height`, and a visual pedestal."""
+    """A static table at world (x, y) = `pos`: a colliding top of half extents `half` (m, x, y)
+    whose surface is at `height` (m), and a visual pedestal; returns `spec`."""
     world = spec.worldbody
     world.add_geom(
         name=name,
@@ -134,12 +129,13 @@ def add_table(
 def add_ball(
     spec: mujoco.MjSpec,
     pos: tuple[float, float, float],
-    mass: float = LIFT_BALL_MASS,
+    mass: float,
     radius: float = BALL_RADIUS,
     name: str = "ball0",
     quat: tuple[float, float, float, float] = (1, 0, 0, 0),
 ) -> mujoco.MjSpec:
-    """A free ball centred at world `pos`, with a site `name` at its centre (the weld target)."""
+    """A free ball of `mass` (kg) centred at world `pos` (m), with a site `name` at its centre
+    (the weld target); returns `spec`."""
     body = spec.worldbody.add_body(name=name, pos=list(pos), quat=list(quat))
     body.add_freejoint(name=name)
     body.add_geom(
@@ -157,25 +153,6 @@ def add_ball(
     return spec
 
 
-def add_tables_and_balls(
-    spec: mujoco.MjSpec,
-    table_height: float = TABLE_HEIGHT,
-    n_balls: int = 1,
-    ball_mass: float = BALL_MASS,
-    table_pos: tuple[tuple[float, float], ...] = TABLE_POS,
-) -> mujoco.MjSpec:
-    """Source and target tables (`table0`, `table1`) and `n_balls` (1 or 2) balls on the source."""
-    if n_balls not in (1, 2):
-        raise DpcError(f"n_balls must be 1 or 2 (one per arm), got {n_balls}.")
-    for i, xy in enumerate(table_pos):
-        add_table(spec, xy, table_height, name=f"table{i}")
-    x = table_pos[0][0] - TABLE_HALF[0] + BALL_EDGE_INSET
-    for k in range(n_balls):
-        y = table_pos[0][1] + (0.5 - k) * BALL_SPACING * (n_balls - 1)  # ball k near arm k
-        add_ball(spec, (x, y, table_height + BALL_RADIUS), ball_mass, name=f"ball{k}")
-    return spec
-
-
 def enable_ee_contacts(spec: mujoco.MjSpec, arm: int = 0) -> mujoco.MjSpec:
     """Let every geom of arm `arm`'s end-effector body and its children touch the box."""
     ee_body = spec.site(arm_prefix(arm) + arms.EE_SITE).parent
@@ -183,6 +160,20 @@ def enable_ee_contacts(spec: mujoco.MjSpec, arm: int = 0) -> mujoco.MjSpec:
         geom.contype, geom.conaffinity = EE_CONTYPE, EE_CONAFFINITY
         geom.condim = 3
     return spec
+
+
+def grasp_offset(arm: Arm, variant: str, task: str) -> tuple[float, float, float]:
+    """The grasp site's offset (m, ee-body frame) from arm `arm`'s ee site: mid-jaw for a gripper
+    (`GRASP_OFFSET`), the ee site itself for a URDF arm. Raises `DpcError` for other end
+    effectors (`variant` and `task` name the caller in the message)."""
+    if isinstance(arm, arms.UrdfArm):
+        return (0.0, 0.0, 0.0)  # the ball centre at the ee site
+    if arm.ee_shape != "gripper":
+        raise DpcError(
+            f"Task {task!r} grasps a ball; variant {variant!r} has a {arm.ee_shape} end effector. "
+            "Use a gripper arm, e.g. regular, longer or double."
+        )
+    return GRASP_OFFSET
 
 
 def add_grasp(
@@ -233,61 +224,9 @@ def add_weld(spec: mujoco.MjSpec, ball: str, arm: int = 0, active: bool = False)
     return spec
 
 
-def task_spec(task: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
-    """Robot, scene and the objects of `task` (one of `TASKS`) as one spec.
-
-    `arm` defaults to the task's variant in `TASK_ARMS`. The home keyframe holds every object at
-    rest (pushing, carrying) or the ball in the gripper (lifting).
-    """
-    if task not in TASK_ARMS:
-        raise DpcError(f"Unknown task {task!r}; known tasks: {sorted(TASK_ARMS)}.")
-    robot = resolve(TASK_ARMS[task] if arm is None else arm)
-    spec = build_spec(robot)
-    spec.modelname = f"a1_{robot.name}_{task}"
-    if task == "reaching":
-        return spec
-    if not robot.arms:
-        raise DpcError(f"Task {task!r} needs an arm; variant {robot.name!r} has none.")
-    for i in range(len(robot.arms)):
-        enable_ee_contacts(spec, i)
-    if task == "pushing":
-        return add_box(spec)
-
-    offsets = [_grasp_offset(task, robot.name, a) for a in robot.arms]
-    if task == "lifting":
-        for i, off in enumerate(offsets):
-            add_grasp_site(spec, i, off)
-        pos, quat = _home_site_poses(spec, [arm_prefix(i) + "grasp" for i in range(len(offsets))])
-        for i in range(len(offsets)):
-            add_ball(spec, pos[i], LIFT_BALL_MASS, name=f"ball{i}", quat=quat[i])
-            add_weld(spec, f"ball{i}", i, active=True)
-        return spec
-
-    height = TABLE_HEIGHT_HIGH if task == "carrying_high" else TABLE_HEIGHT
-    add_tables_and_balls(spec, height, n_balls=len(robot.arms))
-    for i, off in enumerate(offsets):
-        add_grasp(spec, f"ball{i}", i, off, active=False)
-    return spec
-
-
-def build_task_scene(task: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjModel:
-    """Compile `task_spec(task, arm)`."""
-    return task_spec(task, arm).compile()
-
-
-def _grasp_offset(task: str, name: str, arm: Arm) -> tuple[float, float, float]:
-    if isinstance(arm, arms.UrdfArm):
-        return (0.0, 0.0, 0.0)  # the ball centre at the ee site
-    if arm.ee_shape != "gripper":
-        raise DpcError(
-            f"Task {task!r} grasps a ball; variant {name!r} has a {arm.ee_shape} end effector. "
-            "Use a gripper arm, e.g. regular, longer or double."
-        )
-    return GRASP_OFFSET
-
-
-def _home_site_poses(spec: mujoco.MjSpec, sites: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """World positions (n, 3) and quaternions (n, 4) of `sites` in the home keyframe."""
+def home_site_poses(spec: mujoco.MjSpec, sites: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """World positions (n, 3) m and quaternions (n, 4) of `sites` in the home keyframe (compiles
+    a copy of the scene so far; `spec` is unchanged)."""
     model = spec.compile()
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
@@ -304,7 +243,7 @@ def _home_site_poses(spec: mujoco.MjSpec, sites: list[str]) -> tuple[np.ndarray,
 
 @dataclasses.dataclass(frozen=True)
 class FreeObject:
-    """A free body (box or ball) of a task scene."""
+    """A free body (box or ball) of a scene."""
 
     name: str
     body: int
@@ -315,14 +254,14 @@ class FreeObject:
 
 @dataclasses.dataclass(frozen=True)
 class PropLayout:
-    """A task scene's object indices (see `prop_layout`); static, safe to close over in jit."""
+    """A scene's object indices (see `prop_layout`); static, safe to close over in jit."""
 
     box: FreeObject | None
     balls: tuple[FreeObject, ...]
     ball_sites: np.ndarray  # (n_balls,) site ids at the ball centres
     grasp_sites: np.ndarray  # (n_welds,) site ids between each arm's jaws
     welds: np.ndarray  # (n_welds,) equality ids; weld k holds ball k at arm k's grasp site
-    table_geoms: np.ndarray  # (n_tables,) geom ids of the table tops: source, target
+    table_geoms: np.ndarray  # (n_tables,) geom ids of the table tops, in name order
     table_tops: np.ndarray  # (n_tables, 3) m, world centre of each table's top surface
 
     @property
@@ -331,7 +270,8 @@ class PropLayout:
 
 
 def prop_layout(model: mujoco.MjModel) -> PropLayout:
-    """Indices of the objects in a model from `build_task_scene` (empty for reaching)."""
+    """Indices of the objects these builders named in `model` (`box`, `ball<k>`, `grasp<k>`,
+    `table<k>`); empty for a scene without objects."""
 
     def find(kind: mujoco.mjtObj, name: str) -> int:
         return mujoco.mj_name2id(model, kind, name)

@@ -1,8 +1,9 @@
 """The pushing task (paper §IV): walk forward and push a free box with the arm.
 
-Scene (`props.task_spec("pushing", arm)`): a free 0.2 m, 1 kg cube on the floor 0.7 m ahead;
-only the end effector (the `pusher`'s plate, or a gripper's three boxes) touches it. The default
-arm is `pusher`, the paper's "heavier but flat" arm (0.5 kg plate).
+Scene (`PushingEnv.scene_spec(arm)`): a free 0.2 m, 1 kg cube (`BOX_*`) on the floor 0.7 m
+ahead; only the end effector (the `pusher`'s plate, or a gripper's three boxes) touches it. The
+default arm is `pusher`, the paper's "heavier but flat" arm (0.5 kg plate); any WidowX-like arm
+(`ArmSpec`) can push.
 
 Script: the body walks at a constant command (v_x 0.2 m/s) and stops (command 0) at
 `command_switch` = 5.5 s, when the box is about at its target 1.5 m ahead; the arm moves from
@@ -31,12 +32,17 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 
-from dpc_mjx.envs import scripts
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig, _number, _positive
-from dpc_mjx.robots import props
-from dpc_mjx.robots.variants import Arm, RobotSpec
+from dpc_mjx.envs.tasks import scripts
+from dpc_mjx.robots import objects
+from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
+# The box (m, kg): a light 0.2 m cardboard cube 0.7 m ahead of the trunk.
+BOX_HALF = (0.1, 0.1, 0.1)
+BOX_MASS = 1.0
+BOX_POS = (0.7, 0.0)  # on the floor, world x, y
+BOX_FRICTION = 0.5  # box-floor and box-plate (the box has contact priority)
 PUSH_REACH = 0.30  # m, ee site ahead of the trunk origin (x, trunk frame)
 PUSH_HEIGHT = 0.15  # m, ee site above the floor
 PUSH_PITCH = math.radians(60.0)  # plate normal below the horizontal
@@ -73,6 +79,7 @@ class PushingEnv(DpcEnv):
     """Pushing: see the module doc."""
 
     TASK = "pushing"
+    DEFAULT_ARM = "pusher"
 
     def __init__(self, config: PushingConfig, arm: str | Arm | RobotSpec | None = None):
         super().__init__(config, arm)
@@ -92,8 +99,16 @@ class PushingEnv(DpcEnv):
         self._box_qpos = box.qpos[:2]
         self._box_start = np.asarray(model.key_qpos[0][box.qpos[:2]], np.float32)
 
+    @classmethod
+    def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
+        """The robot (`arm`; None: `DEFAULT_ARM`) with its end effectors touching the box, and
+        the box at rest on the floor (home key)."""
+        robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
+        spec = objects.robot_scene(robot, cls.TASK)
+        return objects.add_box(spec, BOX_POS, BOX_HALF, BOX_MASS, BOX_FRICTION)
+
     def build_model(self, arm: str | Arm | RobotSpec | None) -> mujoco.MjModel:
-        return props.task_spec(self.TASK, arm).compile()
+        return self.scene_spec(arm).compile()
 
     @classmethod
     def check_arm(cls, robot: RobotSpec) -> None:

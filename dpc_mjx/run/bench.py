@@ -1,8 +1,9 @@
 """Throughput of the full DPC env vs MJX physics alone, at the same batch (`dpc-mjx bench`,
 `experiments/bench_env.py`).
 
-Per batch: the env (jit(vmap(step)): 5 x [controller tick + mjx.step], disturbances, obs, reward,
-NaN guard; zero actions with the 'policy' controller) and MJX physics alone (`sim.make_rollout`
+Per batch: the env through the rollout core (`envs.rollout.make_chunk` of one step: 5 x
+[controller tick + mjx.step], disturbances, obs, reward, NaN guard, the episode tally; zero
+actions with the 'policy' controller) and MJX physics alone (`sim.make_rollout`
 with 5 steps per call, robot standing on leg servos), both counted in env steps of 20 ms (5
 physics steps), one call per env step, after a first call that compiles (timed apart).
 """
@@ -12,10 +13,10 @@ from __future__ import annotations
 import time
 
 import jax
-import jax.numpy as jp
 import numpy as np
 
 from dpc_mjx import sim
+from dpc_mjx.envs import rollout
 from dpc_mjx.envs.registry import make
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 
@@ -40,10 +41,9 @@ def time_calls(fn, x, calls: int):
 def bench_env(arm: str, batch: int, calls: int, task: str = "a1_arm/reaching") -> dict:
     """{'env_sps', 'phys_sps' (env steps/s), 'env_compile', 'phys_compile' (s)} at `batch`."""
     env = make(task, arm=arm)
-    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), batch))
-    action = jp.zeros((batch, env.action_size))
-    step = jax.jit(jax.vmap(env.step))
-    c_env, t_env, _ = time_calls(lambda s: step(s, action), state, calls)
+    carry, key = rollout.start(env, batch, seed=0)
+    step = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, chunk=1)
+    c_env, t_env, _ = time_calls(lambda c: step(c, key)[0], carry, calls)
 
     servo = with_leg_servos(env.model)
     mx = sim.put_model(servo)

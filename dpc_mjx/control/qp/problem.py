@@ -1,0 +1,180 @@
+"""The problem as the kernel sees it: sanitised, equilibrated, with G's products stored.
+
+`_prepare` replaces a non-finite problem by a harmless flagged one, scales it (Ruiz equilibration
+of [P G'; G 0], variable scaling D (n, ...), row scaling E (m, ...), 2 sweeps, and a cost scaling
+c (...), so that float32 works with entries of order one) and stores what every iteration reads:
+the entries of Gs = E G D by rows and by columns (for Gs x and Gs'y) and the row products
+Gs_ri Gs_rj from which `_normal_columns` forms H = Ps + Gs' diag(w) Gs. Only the entries of G's
+pattern are stored (structure.py). docs/decisions.md ("Low-level controller: the QP solver") has
+the method and the reasons for this layout.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from flax import struct
+
+from dpc_mjx.control.qp.ops import _all_finite, _fold, _inf_norm, _max, _pin, _pin_flag, _sum, _take
+from dpc_mjx.control.qp.settings import QPSettings
+from dpc_mjx.control.qp.structure import _Structure
+
+_NORM_MIN = 1e-12  # a zero row or column is left unscaled by the equilibration
+
+
+def _diagonal_factor(k: int, regularization: float, like: jax.Array) -> jax.Array:
+    """(k, 1, ...) constant of like's dtype: 1 + regularization first (the diagonal), then 1."""
+    f = np.ones(k)
+    f[0] += regularization
+    return jp.asarray(f, like.dtype).reshape((k,) + (1,) * (like.ndim - 1))
+
+
+def _equilibrate(P: jax.Array, G: jax.Array, sweeps: int, one: jax.Array):
+    """Ruiz scaling D (n, ...), E (m, ...) making the columns of [P G'; G 0] of unit inf-norm.
+
+    P and G are finite here, so no NaN can arise and a compare-select maximum (cheaper on
+    XLA:CPU than the NaN-propagating jp.maximum) gives the same result.
+    """
+
+    def col_max(v, axis=0):
+        return _fold(lambda a, b: jp.where(a > b, a, b), v, axis)
+
+    d = jp.ones_like(P[0])
+    e = jp.ones_like(G[:, 0])
+    for _ in range(sweeps):
+        ps = jp.abs(P) * (d[:, None] * d[None, :])
+        gs = _pin(jp.abs(G) * (e[:, None] * d[None, :]), one)  # else XLA splits it over threads
+        col = jp.maximum(col_max(ps), col_max(gs))  # (n, ...)
+        row = col_max(gs, axis=1)  # (m, ...)
+        d = _pin(d * jax.lax.rsqrt(jp.where(col > _NORM_MIN, col, 1.0)), one)
+        e = _pin(e * jax.lax.rsqrt(jp.where(row > _NORM_MIN, row, 1.0)), one)
+    return d, e
+
+
+@struct.dataclass
+class _Scaled:
+    """The sanitised problem in equilibrated units: x = d * xs, Gs = E G D, cost times c."""
+
+    P: jax.Array  # (n, n, ...) sanitised original P (for the objective)
+    q: jax.Array  # (n, ...) sanitised original q
+    h: jax.Array  # (m, ...) sanitised original h
+    Ps: jax.Array  # (n, n, ...) c D P D
+    qs: jax.Array  # (n, ...) c D q
+    Gs: jax.Array  # (m, n, ...) E G D (0 outside the pattern)
+    hs: jax.Array  # (m, ...) E h
+    d: jax.Array  # (n, ...) variable scaling D
+    e: jax.Array  # (m, ...) row scaling E
+    c: jax.Array  # (...) cost scaling
+    inv_d: jax.Array  # (n, ...) 1 / d
+    inv_e: jax.Array  # (m, ...) 1 / e
+    inv_c: jax.Array  # (...) 1 / c
+    g_abs: jax.Array  # (...) max_j sum_i |Gs_ij| / d_j, bounds |G|'|z| in original units (times c)
+    norms: jax.Array  # (2, ...) ||h||_inf, ||q||_inf (original units)
+    finite: jax.Array  # (...) bool, the input was finite
+    one: jax.Array  # (...) ones, for _pin
+    p_cols: list  # columns Ps[j:, j] (n - j, ...), the diagonal entry times (1 + reg)
+    g_rows: jax.Array  # (m, K, ...) the entries of each row of Gs (st.rows), for Gs x
+    g_cols: jax.Array  # (n, L, ...) the entries of each column of Gs (st.cols), for Gs'y
+    gg_cols: list  # per column j of H: None or the products Gs_ri Gs_rj (T, hi - lo, ...) of
+    #   st.normal[j], the diagonal entry times (1 + reg)
+    st: _Structure = struct.field(pytree_node=False)  # the pattern of G and its index tables
+
+
+def _pattern_mv(values: jax.Array, index: np.ndarray, x: jax.Array) -> jax.Array:
+    """sum_k values[:, k] * x[index[:, k]] (r, ...): a product with a matrix stored as its
+    pattern's entries per row (`values` (r, k_max, ...)) and their column indices (r, k_max)."""
+    out = values[:, 0] * _take(x, index[:, 0])
+    for k in range(1, index.shape[1]):
+        out = out + values[:, k] * _take(x, index[:, k])
+    return out
+
+
+def _g_mv(pr: _Scaled, x: jax.Array) -> jax.Array:
+    """Gs x (m, ...) for x (n, ...), from the entries of the pattern only."""
+    return _pattern_mv(pr.g_rows, pr.st.rows[1], x)
+
+
+def _g_mtv(pr: _Scaled, y: jax.Array) -> jax.Array:
+    """Gs'y (n, ...) for y (m, ...), from the entries of the pattern only."""
+    return _pattern_mv(pr.g_cols, pr.st.cols[1], y)
+
+
+def _g_tables(Gs: jax.Array, st: _Structure, cfg: QPSettings):
+    """The g_rows, g_cols and gg_cols of _Scaled from Gs (m, n, ...). (They need no pin: the
+    iterations read them as loop inputs, computed once; pinning them measured the same.)"""
+    m, n = st.m, st.n
+    if st.pattern is None:  # dense: slices, no gathers
+        g_rows, g_cols = Gs, jp.swapaxes(Gs, 0, 1)
+        products = [Gs[:, j:] * Gs[:, j : j + 1] for j in range(n)]
+    else:
+        flat = jp.concatenate([Gs.reshape((m * n,) + Gs.shape[2:]), jp.zeros_like(Gs[:1, 0])])
+        g_rows, g_cols = flat[st.rows[0]], flat[st.cols[0]]
+        products = [None if t is None else flat[t[2]] * flat[t[3]] for t in st.normal]
+    gg_cols = []
+    for j, products_j in enumerate(products):
+        if products_j is None:
+            gg_cols.append(None)
+            continue
+        if st.normal[j][0] == 0:  # the diagonal entry is first
+            diag = _diagonal_factor(products_j.shape[1], cfg.regularization, Gs[0])
+            products_j = products_j * diag  # noqa: PLW2901
+        gg_cols.append(products_j)
+    return g_rows, g_cols, gg_cols
+
+
+def _prepare(P, q, G, h, cfg: QPSettings, st: _Structure) -> _Scaled:
+    """Sanitise (a non-finite problem becomes min 1/2|x|^2 s.t. 0 <= 1, flagged) and scale.
+
+    Entries of G outside the pattern st are set to 0, so they are never read.
+    """
+    n = q.shape[0]
+    # a runtime 1 (...) that XLA cannot fold (see _pin), cheap to recompute
+    one = 1.0 + 0.0 * jp.isfinite(q[0]).astype(q.dtype)
+    if st.pattern is not None:
+        G = jp.where(st.mask.reshape(st.mask.shape + (1,) * (q.ndim - 1)), G, 0.0)
+    finite = _all_finite(P, 2) & _all_finite(q) & _all_finite(G, 2) & _all_finite(h)
+    finite = _pin_flag(finite, one)
+    eye = jp.eye(n, dtype=q.dtype).reshape((n, n) + (1,) * (q.ndim - 1))
+    P = jp.where(finite, 0.5 * (P + jp.swapaxes(P, 0, 1)), eye)
+    q = jp.where(finite, q, 0.0)
+    G = jp.where(finite, G, 0.0)
+    h = jp.where(finite, h, 1.0)
+
+    d, e = _equilibrate(P, G, cfg.ruiz_iterations, one)
+    Ps = P * (d[:, None] * d[None, :])
+    qs = q * d
+    Gs = _pin(G * (e[:, None] * d[None, :]), one)  # read by every matvec and row product
+    cost_norm = jp.maximum(_sum(_max(jp.abs(Ps))) / n, _inf_norm(qs))
+    c = _pin(1.0 / jp.clip(cost_norm, 1e-4, 1e6), one)
+    # reciprocals, so that no pinned value is divided (XLA would merge the two divides, see _pin)
+    inv_d, inv_e, inv_c = (_pin(1.0 / v, one) for v in (d, e, c))
+    g_abs = _pin(_max(_sum(jp.abs(Gs)) * inv_d), one)
+    norms = _pin(jp.stack([_inf_norm(h), _inf_norm(q)]), one)
+    Ps, qs = Ps * c, qs * c
+    # H = Ps + Gs' diag(w) Gs is assembled by columns from the products of the rows of Gs.
+    p_cols = [Ps[j:, j] * _diagonal_factor(n - j, cfg.regularization, q) for j in range(n)]
+    hs = h * e
+    inverses = (inv_d, inv_e, inv_c)
+    tables = _g_tables(Gs, st, cfg)
+    return _Scaled(
+        P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, *tables, st
+    )
+
+
+def _normal_columns(pr: _Scaled, w: jax.Array) -> list[jax.Array]:
+    """w (m, ...) -> the columns H[j:, j] (n - j, ...) of H = Ps + Gs' diag(w) Gs, with the
+    diagonal times (1 + regularization), from the stored row products: m n(n+1)/2
+    multiply-adds for a dense G, only the pattern's products for a sparse one."""
+    columns = []
+    for p_col, gg, spec in zip(pr.p_cols, pr.gg_cols, pr.st.normal, strict=True):
+        if gg is None:
+            columns.append(p_col)
+            continue
+        lo, hi, _, _, rows = spec
+        part = p_col[lo:hi]
+        for t in range(rows.shape[0]):
+            part = part + gg[t] * _take(w, rows[t])
+        whole = hi - lo == len(p_col)
+        columns.append(part if whole else jp.concatenate([p_col[:lo], part, p_col[hi:]]))
+    return columns

@@ -1,0 +1,158 @@
+"""The one rollout core: a batch of envs stepped with a policy in jitted chunks, with per-env
+episode tallies and optional per-step records.
+
+Everything that steps envs goes through here: the evaluation protocol (`run_episodes`, used by
+`dpc_mjx.run.eval`), the adapter's data collection (`adapter.data.collect`, on the auto-reset
+batch), SAC's periodic evaluation (`scan_steps` inside its jitted trainer), the demo and the
+benchmarks (`make_chunk`). Three layers:
+
+    tally_step(step, policy, record)  one env step of the batch and its tally (pure)
+    scan_steps(...)                   `len(keys)` steps under `lax.scan` (pure, jit-able)
+    make_chunk / chunks               jitted chunks of steps, iterated on the host; the caller
+                                      decides when to stop (and shows progress)
+
+A tally is per env and ends at the env's first done (fall or NaN reset): its return is the sum of
+rewards up to and including the done step (so a fall's penalty counts once), and its error sums
+run over the steps before the done ("measured" steps), for RMS values. `step` is a batched step
+(`jax.vmap(env.step)`, or a `wrap_for_training` env whose auto-reset keeps the batch running
+after a done; the tally still ends at the first done).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from brax.envs.base import Env, State
+from flax import struct
+
+from dpc_mjx.progress import bar
+
+Policy = Callable[[jax.Array, jax.Array], jax.Array]  # (obs (B, n), key) -> action (B, 6)
+Step = Callable[[State, jax.Array], State]  # batched: (state (B, ...), action (B, 6)) -> state
+# (state before the step, state after) -> a pytree of per-step values, each (B, ...)
+Record = Callable[[State, State], Any]
+# Env metrics summed over the measured steps (squared errors: rad^2, (m/s)^2, (rad/s)^2).
+ERROR_SUMS = ("roll_sq", "pitch_sq", "vx_sq_err", "vy_sq_err", "yaw_rate_sq_err")
+
+
+def zero_policy(obs: jax.Array, key: jax.Array) -> jax.Array:
+    """Action 0 (what 'mbc' and 'oracle' envs ignore anyway)."""
+    del key
+    return jp.zeros(obs.shape[:-1] + (6,))
+
+
+@struct.dataclass
+class Tally:
+    """Per-env episode sums, each (B,) float32; an env stops counting at its first done."""
+
+    ret: jax.Array  # sum of rewards up to and including the done step
+    length: jax.Array  # steps up to and including the done step
+    fell: jax.Array  # 1 if the episode ended in a fall
+    nan: jax.Array  # 1 if it ended in a NaN reset
+    ended: jax.Array  # 1 once done
+    measured: jax.Array  # steps before the done (those of the error sums)
+    errors: dict[str, jax.Array]  # `ERROR_SUMS` over the measured steps
+
+    @classmethod
+    def zeros(cls, batch: int) -> Tally:
+        z = jp.zeros(batch)
+        return cls(z, z, z, z, z, z, dict.fromkeys(ERROR_SUMS, z))
+
+    def add(self, state: State) -> Tally:
+        """The tally after `state` (the step just taken)."""
+        live = 1.0 - self.ended  # 1 while the episode runs
+        m = state.metrics
+        counted = live * (1.0 - state.done)
+        return Tally(
+            ret=self.ret + live * state.reward,
+            length=self.length + live,
+            fell=jp.maximum(self.fell, live * m["fall"]),
+            nan=jp.maximum(self.nan, live * m["nan_resets"]),
+            ended=jp.maximum(self.ended, live * state.done),
+            measured=self.measured + counted,
+            errors={k: v + counted * m[k] for k, v in self.errors.items()},
+        )
+
+
+Carry = tuple[State, Tally]
+
+
+def tally_step(step: Step, policy: Policy, record: Record | None = None):
+    """`((state, tally), key) -> ((state, tally), per-step record or None)`: one env step of
+    the batch with action `policy(state.obs, key)`."""
+
+    def one(carry: Carry, key: jax.Array):
+        state, tally = carry
+        new = step(state, policy(state.obs, key))
+        return (new, tally.add(new)), (None if record is None else record(state, new))
+
+    return one
+
+
+def scan_steps(step: Step, policy: Policy, carry: Carry, keys: jax.Array, record=None):
+    """`len(keys)` steps under `lax.scan` (pure; jit it or call it inside a jitted function).
+    Returns the carry and the records stacked (steps, B, ...)."""
+    return jax.lax.scan(tally_step(step, policy, record), carry, keys)
+
+
+def make_chunk(step: Step, policy: Policy, chunk: int, record: Record | None = None):
+    """jit of `(carry, key) -> (carry, records)`: `chunk` steps, one key per step split from
+    `key`."""
+
+    def run(carry: Carry, key: jax.Array):
+        return scan_steps(step, policy, carry, jax.random.split(key, chunk), record)
+
+    return jax.jit(run)
+
+
+def start(env: Env, batch: int, seed: int) -> tuple[Carry, jax.Array]:
+    """The batch reset from `seed` (env i from the i-th key of one split) with a zero tally,
+    and the key that the chunks continue from."""
+    key, k_reset = jax.random.split(jax.random.PRNGKey(seed))
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(k_reset, batch))
+    return (state, Tally.zeros(batch)), key
+
+
+def chunks(run_chunk: Callable, carry: Carry, key: jax.Array) -> Iterator[tuple[Carry, Any]]:
+    """Run `run_chunk` (from `make_chunk`) again and again, yielding `(carry, records as numpy)`
+    after each chunk; the caller stops by leaving the loop."""
+    while True:
+        key, k = jax.random.split(key)
+        carry, records = run_chunk(carry, k)
+        jax.block_until_ready(carry)
+        yield carry, jax.device_get(records)
+
+
+def run_episodes(
+    env: Env,
+    episodes: int,
+    steps: int,
+    seed: int = 0,
+    policy: Policy = zero_policy,
+    chunk: int = 50,
+    progress: bool = False,
+    desc: str = "episodes",
+) -> dict[str, np.ndarray]:
+    """Run `episodes` envs (one batch, no auto-reset) for `steps` env steps; per-episode arrays
+    (episodes,): 'return', 'fell' (bool), 'nan' (bool), 'length' (steps until done,
+    inclusive), 'measured' (steps before the done) and the `ERROR_SUMS` over the measured
+    steps. Steps run in jitted chunks of the largest divisor of `steps` not above `chunk`."""
+    chunk = max(c for c in range(1, min(chunk, steps) + 1) if steps % c == 0)
+    carry, key = start(env, episodes, seed)
+    run_chunk = make_chunk(jax.vmap(env.step), policy, chunk)
+    with bar(episodes * steps, desc, "step", progress) as pbar:
+        for _, (carry, _) in zip(range(steps // chunk), chunks(run_chunk, carry, key)):
+            pbar.update(episodes * chunk)
+    t = jax.device_get(carry[1])
+    return {
+        "return": np.asarray(t.ret),
+        "length": np.asarray(t.length),
+        "fell": np.asarray(t.fell) > 0,
+        "nan": np.asarray(t.nan) > 0,
+        "measured": np.asarray(t.measured),
+        **{k: np.asarray(v) for k, v in t.errors.items()},
+    }

@@ -1,0 +1,42 @@
+"""Exports: a trained DPC policy as data, msgpack files plus a JSON sidecar, never pickle (a pickle
+runs code when it is loaded and ties the files to this library's classes).
+
+An export is a folder:
+
+    dpc.json                 the sidecar: format and library version, the observation layout,
+                             sizes, action scaling, configs, per file its sha256 (`sidecar.py`)
+    policy.msgpack           `PolicyState` (actor params, observation statistics)
+    decoder.msgpack          `DecoderState`
+    encoder_<arm>.msgpack    `EncoderState`, one per arm
+
+The modules, by role:
+
+    export.py         export, add_encoder: the networks checked against each other, then written
+    load.py           load -> Artefacts: the sidecar checked against itself and every size it
+                      declares against its file, then the networks restored; stale, truncated or
+                      mismatched files fail with a message saying what to do
+    sidecar.py        the sidecar's keys: building them, reading and cross-checking them
+    serialization.py  checked, atomic files (msgpack, JSON); also the training checkpoints'
+    inference.py      NumpyPolicy: runs an export with numpy + msgpack only (copy the file alone to
+                      a robot's computer; it imports nothing else, not even this package)
+"""
+
+from dpc_mjx.envs.observations import S_BODY_NAMES
+from dpc_mjx.io import serialization
+from dpc_mjx.io.export import add_encoder, export
+from dpc_mjx.io.load import Artefacts, load
+from dpc_mjx.io.sidecar import DECODER_FILE, FORMAT_VERSION, POLICY_FILE, REEXPORT, SIDECAR
+
+__all__ = [
+    "DECODER_FILE",
+    "FORMAT_VERSION",
+    "POLICY_FILE",
+    "REEXPORT",
+    "S_BODY_NAMES",
+    "SIDECAR",
+    "Artefacts",
+    "add_encoder",
+    "export",
+    "load",
+    "serialization",
+]

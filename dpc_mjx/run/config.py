@@ -1,0 +1,142 @@
+"""The configuration of a whole run (`RunConfig`) and the run folder's config file.
+
+The defaults are the recipe of the shipped `regular` run (docs/results.md). Hyperparameters are
+overridden by dotted name (`RunConfig().replace(**{"sac.num_envs": 32})`, or
+`dpc-mjx train --set sac.num_envs=32`); the env's own options are the task config's fields
+(`env.<field>`), SAC's are `SacConfig`'s and the adapter's `AdapterConfig`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+from typing import Any
+
+from dpc_mjx import adapter as adapter_lib
+from dpc_mjx import sac
+from dpc_mjx.envs.registry import get_config
+from dpc_mjx.errors import DpcError
+from dpc_mjx.io.serialization import jsonable, read_json, write_json
+
+CONFIG_FILE = "config.json"
+ACTOR_INITS = ("random", "oracle_regression")
+
+
+# The SAC settings of the shipped run (docs/results.md, "DPC on the reaching task"): a longer run
+# than SacConfig's default, larger batches, a shorter horizon (a push acts within ~0.2-1 s), a
+# low starting temperature and a slow actor, so that the oracle-regressed actor is refined rather
+# than overwritten; the critics learn alone for the first 20,000 gradient steps.
+TRAINED_SAC = sac.SacConfig(
+    num_timesteps=1_000_000,
+    batch_size=512,
+    discounting=0.97,
+    init_alpha=0.01,
+    actor_warmup_steps=20_000,
+    actor_learning_rate=3e-5,
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class RunConfig:
+    """Everything a run does (the env's own options are `env_overrides` of its task config).
+
+    The defaults are the recipe of the shipped `regular` run. The paper's recipe (SAC from a
+    random actor) is `actor_init="random"` with `SacConfig()`'s settings, e.g. on the command line
+    `--set actor_init=random sac.init_alpha=1.0 sac.actor_warmup_steps=0`.
+    """
+
+    task: str = "a1_arm/reaching"
+    arm: str = "regular"  # a variant name (`dpc_mjx.robots.VARIANTS`)
+    env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
+    samples: int = 100_000  # random-motion transitions for the adapter
+    data_envs: int = 64
+    adapter: adapter_lib.AdapterConfig = adapter_lib.AdapterConfig()
+    sac: sac.SacConfig = TRAINED_SAC
+    eval_episodes: int = 64
+    eval_steps: int = 1000  # env steps of 20 ms
+    eval_controllers: tuple[str, ...] = ("mbc", "dpc", "oracle")
+    # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
+    # the oracle's u over the adapter's samples, `sac.warm_start`; then SAC as usual)
+    actor_init: str = "oracle_regression"
+    seed: int = 0
+
+    def validate(self) -> None:
+        get_config(self.task, **self.env_overrides)  # task name and overrides
+        for name in ("samples", "data_envs", "eval_episodes", "eval_steps"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 1:
+                raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
+        self.adapter.validate()
+        self.sac.validate()
+        if self.actor_init not in ACTOR_INITS:
+            raise DpcError(f"actor_init={self.actor_init!r} is not one of {list(ACTOR_INITS)}.")
+
+    def to_json(self) -> dict:
+        return jsonable(dataclasses.asdict(self))
+
+    @classmethod
+    def from_json(cls, d: dict) -> RunConfig:
+        try:
+            d = dict(d)
+            d["adapter"] = adapter_lib.AdapterConfig(**tuples(d["adapter"]))
+            d["sac"] = sac.SacConfig(**tuples(d["sac"]))
+            d["eval_controllers"] = tuple(d["eval_controllers"])
+            d["env_overrides"] = tuples(d["env_overrides"])
+            return cls(**d)
+        except (KeyError, TypeError) as e:
+            raise DpcError(f"Not a RunConfig ({e}); start a new run folder.") from e
+
+    def replace(self, **dotted: Any) -> RunConfig:
+        """A copy with overrides by dotted name: `arm='longer'`, `sac.num_envs=32`,
+        `adapter.epochs=20`, `env.push_force=(0, 60)`."""
+        top, sub = {}, {"adapter": {}, "sac": {}, "env": {}}
+        for key, value in dotted.items():
+            head, _, rest = key.partition(".")
+            if rest and head in sub:
+                sub[head][rest] = value
+            elif not rest and head in {f.name for f in dataclasses.fields(self)}:
+                top[key] = value
+            else:
+                raise DpcError(
+                    f"Unknown run option {key!r}; use a RunConfig field "
+                    f"({[f.name for f in dataclasses.fields(self)]}) or adapter.<field>, "
+                    "sac.<field>, env.<field>."
+                )
+        out = dataclasses.replace(self, **top)
+        try:
+            out = dataclasses.replace(
+                out,
+                adapter=dataclasses.replace(out.adapter, **sub["adapter"]),
+                sac=dataclasses.replace(out.sac, **sub["sac"]),
+                env_overrides={**out.env_overrides, **sub["env"]},
+            )
+        except TypeError as e:
+            raise DpcError(f"Unknown option in {sorted(dotted)}: {e}.") from e
+        out.validate()
+        return out
+
+
+def tuples(d: dict) -> dict:
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+
+
+def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
+    """The `RunConfig` a run folder was started with."""
+    path = pathlib.Path(run_dir) / CONFIG_FILE
+    return RunConfig.from_json(read_json(path, "run config", hint="is this a run folder?"))
+
+
+def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None:
+    """Write the run's config; when resuming, check that it is the one the folder holds."""
+    run_dir = pathlib.Path(run_dir)
+    path = run_dir / CONFIG_FILE
+    if resume:
+        saved = read_json(path, "run config", hint="start the run without --resume")
+        if saved != config.to_json():
+            raise DpcError(
+                f"{path} holds another configuration than this run's; resume with the same "
+                "options, or start a new run folder."
+            )
+    elif path.exists():
+        raise DpcError(f"{run_dir} already holds a run; resume it or pick another folder.")
+    write_json(path, config.to_json())

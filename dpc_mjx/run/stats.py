@@ -1,0 +1,43 @@
+"""Confidence intervals for the evaluation tables (fall rates, mean returns, paired differences)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def wilson_ci(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95% (z = 1.96) Wilson score interval of a binomial proportion."""
+    if n == 0:
+        return (math.nan, math.nan)
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def mean_ci(x: np.ndarray, z: float = 1.96) -> tuple[float, float, float]:
+    """Mean and its normal-approximation 95% interval (mean, low, high)."""
+    x = np.asarray(x, float)
+    m = float(np.mean(x))
+    if x.size < 2:
+        return (m, math.nan, math.nan)
+    half = z * float(np.std(x, ddof=1)) / math.sqrt(x.size)
+    return (m, m - half, m + half)
+
+
+def paired_diff_ci(a: np.ndarray, b: np.ndarray, z: float = 1.96) -> tuple[float, float, float]:
+    """Mean of the per-episode differences a - b (the same episodes under two controllers) and
+    its normal-approximation 95% interval (mean, low, high): the paired comparison."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.shape != b.shape:
+        raise ValueError(f"paired samples need the same episodes, got {a.shape} and {b.shape}")
+    return mean_ci(a - b, z)
+
+
+def mcnemar_counts(fell_a: np.ndarray, fell_b: np.ndarray) -> tuple[int, int]:
+    """Discordant pairs of a paired fall comparison: (episodes where only a fell, only b fell).
+    An exact McNemar test compares them against Binomial(n, 1/2), n their sum."""
+    fell_a, fell_b = np.asarray(fell_a, bool), np.asarray(fell_b, bool)
+    return int(np.sum(fell_a & ~fell_b)), int(np.sum(fell_b & ~fell_a))

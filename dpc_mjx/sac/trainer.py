@@ -1,0 +1,300 @@
+"""The jitted pieces of one SAC run (`make_trainer`): brax's SAC in our epoch, and an evaluation.
+
+The paper trains the high-level estimator with SAC (§III-C). The algorithm is brax's
+(`brax.training.agents.sac`): its actor and twin critics (built in `sac.networks`), its losses
+(clipped double-Q targets, entropy temperature tuned towards -action_size/2), its uniform replay
+buffer and `acting.actor_step`; `sgd_step` updates temperature, critics, actor and the
+Polyak-averaged target critics as brax's does. Ours: the epoch (`epoch_steps` env steps in one
+jitted `lax.scan`, each actor step followed by `grad_updates_per_step` gradient steps once the
+buffer holds `min_replay_size` transitions), the critic warm-up (`actor_warmup_steps`), the
+initial temperature, and `evaluate`: deterministic episodes (actions times a `gate`, 0 giving the
+same episodes with u = 0) on the library's one rollout core, `envs.rollout.scan_steps`.
+
+What an epoch carries (`Carry`) is a `flax.struct.dataclass` pytree: it crosses `jax.jit`, and a
+checkpoint (`sac.checkpoint`) holds all of it. The host loop around these pieces is `sac.train`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jp
+import optax
+from brax.training import acting, replay_buffers
+from brax.training.acme import running_statistics
+from brax.training.agents.sac import losses as sac_losses
+from brax.training.agents.sac import networks as sac_networks
+from brax.training.types import Transition
+from flax import struct
+
+from dpc_mjx.envs import rollout
+from dpc_mjx.envs.wrappers import wrap_for_training
+from dpc_mjx.sac.config import SacConfig
+from dpc_mjx.sac.networks import make_networks
+
+
+@struct.dataclass
+class TrainingState:
+    """Everything that learns, and the counters."""
+
+    policy_params: dict
+    policy_opt: optax.OptState
+    q_params: dict
+    q_opt: optax.OptState
+    target_q_params: dict
+    log_alpha: jax.Array  # () log of the entropy temperature
+    alpha_opt: optax.OptState
+    normalizer: running_statistics.RunningStatisticsState  # over the observation
+    env_steps: jax.Array  # () env steps so far
+    grad_steps: jax.Array  # () gradient steps so far
+
+
+@struct.dataclass
+class BestPolicy:
+    """The best policy the periodic evaluations have seen."""
+
+    policy_params: dict
+    normalizer: running_statistics.RunningStatisticsState
+    score: jax.Array  # () mean evaluation return (NO_SCORE before the first evaluation)
+    epoch: jax.Array  # () epochs trained before it was evaluated (-1: none yet; 0: the start)
+
+
+NO_SCORE = -1e9  # finite on purpose: every array of a checkpoint stays finite
+
+
+@struct.dataclass
+class Carry:
+    """What one epoch hands to the next; a checkpoint holds all of it but `env_state`."""
+
+    training: TrainingState
+    buffer: replay_buffers.ReplayBufferState
+    key: jax.Array
+    epoch: jax.Array  # () epochs done
+    best: BestPolicy
+
+
+@dataclasses.dataclass(frozen=True)
+class Trainer:
+    """The jitted pieces of one SAC run on one env (see `make_trainer`)."""
+
+    config: SacConfig
+    observation_size: int
+    action_size: int
+    networks: sac_networks.SACNetworks
+    policy_optimizer: optax.GradientTransformation
+    init: Callable  # key -> Carry
+    reset: Callable  # key -> batched env state
+    epoch: Callable  # (Carry, env_state) -> (Carry, env_state, metrics), jitted
+    # (TrainingState, key, gate) -> {'return', 'fall_rate'}: deterministic policy, actions times
+    # `gate` (1: the policy; 0: u = 0, i.e. MBC on the same episodes), jitted
+    evaluate: Callable
+    _compiled: dict = dataclasses.field(default_factory=dict, repr=False)
+    compile_seconds: dict = dataclasses.field(default_factory=dict)  # name -> s, first compile
+
+    def compiled(self, name: str, *args) -> Callable:
+        """`epoch` or `evaluate` compiled ahead of time for these arguments, once per trainer
+        (its compile time goes into `compile_seconds`)."""
+        if name not in self._compiled:
+            t0 = time.perf_counter()
+            self._compiled[name] = getattr(self, name).lower(*args).compile()
+            self.compile_seconds[name] = time.perf_counter() - t0
+        return self._compiled[name]
+
+
+def make_trainer(env, config: SacConfig) -> Trainer:
+    """Build the SAC run on `env` (one unbatched env, e.g. a `LatentObsWrapper`)."""
+    config.validate()
+    batched = wrap_for_training(env)
+    obs_size, action_size = env.observation_size, env.action_size
+    nets = make_networks(obs_size, action_size, config.hidden, config.normalize_observations)
+    make_policy = sac_networks.make_inference_fn(nets)
+    alpha_loss, critic_loss, actor_loss = sac_losses.make_losses(
+        nets, config.reward_scaling, config.discounting, action_size
+    )
+    policy_opt = optax.adam(config.actor_learning_rate or config.learning_rate)
+    q_opt = optax.adam(config.learning_rate)
+    alpha_opt = optax.adam(3e-4)  # brax's choice
+    dummy_obs = jp.zeros((obs_size,))
+    buffer = replay_buffers.UniformSamplingQueue(
+        max_replay_size=config.max_replay_size,
+        dummy_data_sample=Transition(
+            observation=dummy_obs,
+            action=jp.zeros((action_size,)),
+            reward=0.0,
+            discount=0.0,
+            next_observation=dummy_obs,
+            extras={"state_extras": {"truncation": 0.0}, "policy_extras": {}},
+        ),
+        sample_batch_size=config.batch_size * config.grad_updates_per_step,
+    )
+
+    def init(key: jax.Array) -> Carry:
+        k_pi, k_q, k_buf, key = jax.random.split(key, 4)
+        policy_params = nets.policy_network.init(k_pi)
+        q_params = nets.q_network.init(k_q)
+        log_alpha = jp.log(jp.asarray(config.init_alpha, jp.float32))
+        training = TrainingState(
+            policy_params=policy_params,
+            policy_opt=policy_opt.init(policy_params),
+            q_params=q_params,
+            q_opt=q_opt.init(q_params),
+            target_q_params=q_params,
+            log_alpha=log_alpha,
+            alpha_opt=alpha_opt.init(log_alpha),
+            normalizer=running_statistics.init_state(jax.ShapeDtypeStruct((obs_size,), jp.float32)),
+            env_steps=jp.zeros((), jp.int32),
+            grad_steps=jp.zeros((), jp.int32),
+        )
+        best = BestPolicy(
+            policy_params,
+            training.normalizer,
+            jp.asarray(NO_SCORE, jp.float32),
+            jp.full((), -1, jp.int32),
+        )
+        return Carry(training, buffer.init(k_buf), key, jp.zeros((), jp.int32), best)
+
+    def reset(key: jax.Array):
+        return batched.reset(jax.random.split(key, config.num_envs))
+
+    def experience(ts: TrainingState, env_state, buf, key):
+        policy = make_policy((ts.normalizer, ts.policy_params))
+        env_state, tr = acting.actor_step(
+            batched, env_state, policy, key, extra_fields=("truncation",)
+        )
+        normalizer = ts.normalizer
+        if config.normalize_observations:
+            normalizer = running_statistics.update(normalizer, tr.observation)
+        ts = ts.replace(normalizer=normalizer, env_steps=ts.env_steps + config.num_envs)
+        return ts, env_state, buffer.insert(buf, tr)
+
+    def sgd_step(carry, transitions):
+        ts, key = carry
+        key, k_alpha, k_critic, k_actor = jax.random.split(key, 4)
+        a_loss, grads = jax.value_and_grad(alpha_loss)(
+            ts.log_alpha, ts.policy_params, ts.normalizer, transitions, k_alpha
+        )
+        upd, alpha_state = alpha_opt.update(grads, ts.alpha_opt)
+        log_alpha = optax.apply_updates(ts.log_alpha, upd)
+        alpha = jp.exp(ts.log_alpha)
+        c_loss, grads = jax.value_and_grad(critic_loss)(
+            ts.q_params,
+            ts.policy_params,
+            ts.normalizer,
+            ts.target_q_params,
+            alpha,
+            transitions,
+            k_critic,
+        )
+        upd, q_state = q_opt.update(grads, ts.q_opt)
+        q_params = optax.apply_updates(ts.q_params, upd)
+        p_loss, grads = jax.value_and_grad(actor_loss)(
+            ts.policy_params, ts.normalizer, ts.q_params, alpha, transitions, k_actor
+        )
+        upd, p_state = policy_opt.update(grads, ts.policy_opt)
+        policy_params = optax.apply_updates(ts.policy_params, upd)
+        # Critic warm-up: the actor and the temperature wait `actor_warmup_steps` gradient steps
+        # (for a warm-started actor, so that a critic still at its random start does not undo it)
+        learn_actor = ts.grad_steps >= config.actor_warmup_steps
+        policy_params, p_state, log_alpha, alpha_state = jax.tree.map(
+            lambda new, old: jp.where(learn_actor, new, old),
+            (policy_params, p_state, log_alpha, alpha_state),
+            (ts.policy_params, ts.policy_opt, ts.log_alpha, ts.alpha_opt),
+        )
+        target = jax.tree.map(
+            lambda t, q: t * (1 - config.tau) + q * config.tau, ts.target_q_params, q_params
+        )
+        ts = ts.replace(
+            policy_params=policy_params,
+            policy_opt=p_state,
+            q_params=q_params,
+            q_opt=q_state,
+            target_q_params=target,
+            log_alpha=log_alpha,
+            alpha_opt=alpha_state,
+            grad_steps=ts.grad_steps + 1,
+        )
+        losses = {"critic_loss": c_loss, "actor_loss": p_loss, "alpha_loss": a_loss}
+        return (ts, key), losses | {"alpha": jp.exp(log_alpha)}
+
+    def episode_stats(env_state) -> dict[str, jax.Array]:
+        """Sums over the envs whose episode ended at this step."""
+        done = env_state.info["episode_done"]
+        em = env_state.info["episode_metrics"]
+        return {
+            "episodes": jp.sum(done),
+            "return_sum": jp.sum(done * em["sum_reward"]),
+            "falls": jp.sum(done * em["fall"]),
+            "nan_resets": jp.sum(done * em["nan_resets"]),
+            "length_sum": jp.sum(done * em["length"]),
+        }
+
+    def learn(ts, buf, key):
+        buf, transitions = buffer.sample(buf)
+        transitions = jax.tree.map(
+            lambda x: x.reshape((config.grad_updates_per_step, -1) + x.shape[1:]), transitions
+        )
+        (ts, _), losses = jax.lax.scan(sgd_step, (ts, key), transitions)
+        return ts, buf, jax.tree.map(jp.mean, losses)
+
+    def skip(ts, buf, key):
+        del key
+        zero = jp.zeros(())
+        losses = {"critic_loss": zero, "actor_loss": zero, "alpha_loss": zero}
+        return ts, buf, losses | {"alpha": jp.exp(ts.log_alpha)}
+
+    def training_step(carry, _):
+        c, env_state = carry
+        key, k_exp, k_sgd = jax.random.split(c.key, 3)
+        ts, env_state, buf = experience(c.training, env_state, c.buffer, k_exp)
+        ready = buffer.size(buf) >= max(config.min_replay_size, config.batch_size)
+        ts, buf, losses = jax.lax.cond(ready, learn, skip, ts, buf, k_sgd)
+        c = c.replace(training=ts, buffer=buf, key=key)
+        stats = episode_stats(env_state) | losses | {"learning": ready.astype(jp.float32)}
+        return (c, env_state), stats
+
+    def epoch(c: Carry, env_state):
+        (c, env_state), stats = jax.lax.scan(
+            training_step, (c, env_state), None, length=config.actor_steps_per_epoch
+        )
+        sums = ("episodes", "return_sum", "falls", "nan_resets", "length_sum")
+        learning = jp.maximum(jp.sum(stats["learning"]), 1.0)
+        metrics = {  # losses: means over the steps that learned
+            k: jp.sum(v) if k in sums else jp.sum(v * stats["learning"]) / learning
+            for k, v in stats.items()
+            if k != "learning"
+        }
+        return c.replace(epoch=c.epoch + 1), env_state, metrics
+
+    eval_steps = env.unwrapped.config.episode_length
+
+    def evaluate(ts: TrainingState, key: jax.Array, gate: jax.Array) -> dict[str, jax.Array]:
+        """`eval_envs` episodes of the deterministic policy (actions x `gate`), ended at their
+        first done."""
+        policy = make_policy((ts.normalizer, ts.policy_params), deterministic=True)
+        state = jax.vmap(env.reset)(jax.random.split(key, config.eval_envs))
+        carry = (state, rollout.Tally.zeros(config.eval_envs))
+
+        def act(obs, _):  # deterministic: the key is not used
+            return gate * policy(obs, key)[0]
+
+        keys = jax.random.split(key, eval_steps)
+        (_, tally), _ = rollout.scan_steps(jax.vmap(env.step), act, carry, keys)
+        return {"return": jp.mean(tally.ret), "fall_rate": jp.mean(tally.fell)}
+
+    return Trainer(
+        config=config,
+        observation_size=obs_size,
+        action_size=action_size,
+        networks=nets,
+        policy_optimizer=policy_opt,
+        init=jax.jit(init),
+        reset=jax.jit(reset),
+        epoch=jax.jit(epoch, donate_argnums=(0, 1)),
+        evaluate=jax.jit(evaluate),
+    )
+
+
+__all__ = ["NO_SCORE", "BestPolicy", "Carry", "Trainer", "TrainingState", "make_trainer"]

@@ -1,0 +1,33 @@
+"""The README's Architecture section matches the code: every file it names exists, and every
+module of the library is named there."""
+
+import pathlib
+import re
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "dpc_mjx"
+
+
+def _architecture() -> str:
+    text = (ROOT / "README.md").read_text()
+    start = text.index("## Architecture")
+    return text[start : text.index("\n## ", start + 1)]
+
+
+def test_every_file_the_architecture_names_exists():
+    section = _architecture()
+    modules = {p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")}
+    named = set(re.findall(r"(?:[a-z_]+/)*[a-z_0-9]+\.py", section))
+    assert named, "the Architecture section names no file"
+    missing = sorted(n for n in named if not any(m == n or m.endswith("/" + n) for m in modules))
+    assert not missing, f"README Architecture names files that do not exist: {missing}"
+
+
+def test_every_module_is_named_in_the_architecture():
+    words = set(re.findall(r"[a-z_0-9]+", _architecture()))
+    unnamed = sorted(
+        p.relative_to(PACKAGE).as_posix()
+        for p in PACKAGE.rglob("*.py")
+        if p.stem != "__init__" and p.stem not in words
+    )
+    assert not unnamed, f"modules missing from the README's Architecture section: {unnamed}"

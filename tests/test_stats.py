@@ -1,0 +1,44 @@
+"""The evaluation's intervals against values computed by hand (textbook formulas)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from dpc_mjx.run.stats import mcnemar_counts, mean_ci, paired_diff_ci, wilson_ci
+
+TOL = 1e-9  # exact formulas: only float rounding
+
+
+def test_wilson_interval_matches_the_formula_and_stays_in_0_1():
+    lo, hi = wilson_ci(39, 128)
+    p, n, z = 39 / 128, 128, 1.96
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    assert lo == pytest.approx(centre - half, abs=TOL) and hi == pytest.approx(centre + half)
+    assert wilson_ci(0, 64)[0] == 0.0 and 0.0 < wilson_ci(0, 64)[1] < 0.1
+    assert wilson_ci(64, 64)[1] == 1.0 and all(math.isnan(x) for x in wilson_ci(0, 0))
+
+
+def test_mean_interval_is_the_normal_approximation():
+    x = np.array([1.0, 2.0, 4.0, 7.0])
+    m, lo, hi = mean_ci(x)
+    half = 1.96 * np.std(x, ddof=1) / 2.0
+    assert (m, lo, hi) == pytest.approx((3.5, 3.5 - half, 3.5 + half), abs=TOL)
+
+
+def test_paired_difference_uses_the_per_episode_differences():
+    rng = np.random.default_rng(0)
+    base = rng.normal(0.0, 100.0, 64)  # episodes differ a lot, controllers a little
+    a, b = base + 5.0 + rng.normal(0.0, 1.0, 64), base
+    m, lo, hi = paired_diff_ci(a, b)
+    assert lo > 0.0 and m == pytest.approx(5.0, abs=0.5)  # paired: the shift is significant
+    assert mean_ci(a)[1] < mean_ci(b)[2]  # unpaired intervals overlap on the same data
+    with pytest.raises(ValueError, match="same episodes"):
+        paired_diff_ci(a, b[:10])
+
+
+def test_mcnemar_counts_only_the_discordant_episodes():
+    fell_a = np.array([1, 1, 0, 0, 1], bool)
+    fell_b = np.array([1, 0, 1, 0, 0], bool)
+    assert mcnemar_counts(fell_a, fell_b) == (2, 1)
