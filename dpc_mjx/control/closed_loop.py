@@ -76,7 +76,7 @@ def make_chunk(
     """jit(vmap) of `n_ticks` ticks: `(loop_state, command (B,3), wrench (B,6), u (B,6)) -> state`.
 
     `kind`: 'mbc' (u = 0), 'oracle' (u = measured mount wrench + the known external wrench),
-    'observer' (u = the momentum observer's estimate, `controller.observe`) or 'given' (u as
+    'observer' (u = the momentum observer's estimate, `step(..., u=None)`) or 'given' (u as
     passed). `wrench` is an external [force N, torque N·m] applied to the trunk at
     its COM (world frame) in the simulation. Metrics start after `measure_after` s.
     """
@@ -96,7 +96,7 @@ def make_chunk(
         elif kind == "oracle":
             u = oracle_u(lay, d, s.com_pos) + known
         elif kind == "observer":
-            u = controller.observe(ls.ctrl, d).estimate
+            u = None  # the controller's own observer estimate of this tick
         else:
             u = u_given
         cs, ctrl = controller.step(ls.ctrl, d, command, u)

@@ -6,8 +6,8 @@ env's `mjx.Data`; vmap at the call site. Controllers differ only in u:
 
 - `mbc`: u = 0 (the paper's model-based baseline, after Di Carlo et al. 2018);
 - `oracle`: u = the measured arm-mount wrench (privileged upper bound, `oracle_u`);
-- `observer`: u = the momentum observer's estimate (`observer.py`; no training, no force sensor),
-  `LowLevelController.observe(state, data).estimate`;
+- `observer`: u = the momentum observer's estimate (`observer.py`; no training, no force sensor):
+  pass u = None to `LowLevelController.step`;
 - anything else (the DPC policy): pass its u.
 
 The controller's model is the bare A1 (trunk + legs, mass and inertia at the home pose): the arm
@@ -107,11 +107,6 @@ class LowLevelController:
             observer=observer_lib.init(self.config.balance, s),
         )
 
-    def observe(self, cs: ControllerState, d) -> observer_lib.ObserverState:
-        """The observer updated with this tick's data and the previous tick's commanded forces
-        (`step` makes the same update; `.estimate` (6,) is the `observer` controller's u)."""
-        return self._observe(cs, read_state(self.idx, d))
-
     def _observe(self, cs: ControllerState, s: BodyState) -> observer_lib.ObserverState:
         cfg = self.config
         return observer_lib.update(cfg.observer, cfg.balance, cs.observer, s, cs.forces, self.dt)
@@ -154,16 +149,18 @@ class LowLevelController:
         cs: ControllerState,
         d,
         command: jax.Array,
-        u: jax.Array,
+        u: jax.Array | None,
         arm_targets: jax.Array | None = None,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
-        rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM.
+        rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
+        the disturbance observer's estimate of this tick (the `observer` controller).
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
         cfg = self.config
         p = self.plan(cs, d, command)
         s, stance, progress, vel_des = p.state, p.stance, p.progress, p.vel_des
-        prob = self.balance_qp(p, u)
+        observed = self._observe(cs, s)  # this tick's data, the previous tick's forces
+        prob = self.balance_qp(p, observed.estimate if u is None else u)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
         )
@@ -206,7 +203,7 @@ class LowLevelController:
             stance=stance,
             qp=res,
             forces=forces,
-            observer=self._observe(cs, s),
+            observer=observed,
         )
         return new, ctrl
 

