@@ -15,6 +15,8 @@ import pathlib
 import numpy as np
 import pytest
 
+from dpc_mjx import DpcError
+from dpc_mjx.envs.rollout import run_episodes
 from dpc_mjx.run.eval import EPISODE_COLUMNS
 from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
 
@@ -72,3 +74,9 @@ def test_eval_writes_one_csv_row_per_episode(evaluated):
         measured = np.maximum(cell.per_episode["measured"], 1.0)
         roll = np.sqrt(cell.per_episode["roll_sq"] / measured)
         np.testing.assert_allclose([float(r["roll_rms"]) for r in mine], roll, rtol=1e-6)
+
+
+@pytest.mark.parametrize("episodes, steps", [(0, 100), (4, 0)])
+def test_run_episodes_rejects_an_empty_run_before_building_anything(episodes, steps):
+    with pytest.raises(DpcError, match="episodes, steps and chunk >= 1"):
+        run_episodes(None, episodes, steps)  # fails before the env is touched

@@ -29,6 +29,7 @@ import numpy as np
 from brax.envs.base import Env, State
 from flax import struct
 
+from dpc_mjx.errors import DpcError
 from dpc_mjx.progress import bar
 
 Policy = Callable[[jax.Array, jax.Array], jax.Array]  # (obs (B, n), key) -> action (B, 6)
@@ -141,6 +142,10 @@ def run_episodes(
     (episodes,): 'return', 'fell' (bool), 'nan' (bool), 'length' (steps until done,
     inclusive), 'measured' (steps before the done) and the `ERROR_SUMS` over the measured
     steps. Steps run in jitted chunks of the largest divisor of `steps` not above `chunk`."""
+    if episodes < 1 or steps < 1 or chunk < 1:
+        raise DpcError(
+            f"run_episodes needs episodes, steps and chunk >= 1, got {episodes}, {steps}, {chunk}."
+        )
     chunk = max(c for c in range(1, min(chunk, steps) + 1) if steps % c == 0)
     carry, key = start(env, episodes, seed)
     run_chunk = make_chunk(jax.vmap(env.step), policy, chunk)
