@@ -4,7 +4,7 @@
     dpc-mjx train --run runs/x         data -> adapter -> SAC -> export -> evaluation
     dpc-mjx train-adapter --run runs/x only the adapter stage (continue with train --resume)
     dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
-    dpc-mjx eval --export DIR          MBC / DPC / oracle on the protocol of docs/results.md
+    dpc-mjx eval --export DIR          MBC / DPC / oracle (/ observer), protocol of docs/results.md
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
     dpc-mjx variants                   every arm variant built and stood in MJX
@@ -169,12 +169,17 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(handler=_transfer)
 
-    p = sub.add_parser("eval", help="MBC / DPC / oracle with confidence intervals")
+    p = sub.add_parser("eval", help="MBC / observer / DPC / oracle, 95% intervals")
     p.add_argument(
         "--export", help="an export folder (default: the shipped dpc_mjx/artefacts/regular)"
     )
     p.add_argument("--arms", nargs="+", help="arms (default: every arm with an encoder)")
-    p.add_argument("--controllers", nargs="+", default=["mbc", "dpc", "oracle"])
+    p.add_argument(
+        "--controllers",
+        nargs="+",
+        default=["mbc", "dpc", "oracle"],
+        help="any of mbc observer dpc oracle (default: mbc dpc oracle)",
+    )
     p.add_argument("--task", default="a1_arm/reaching")
     p.add_argument("--episodes", type=int, default=64)
     p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
