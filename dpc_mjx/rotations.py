@@ -46,6 +46,23 @@ def to_yaw_frame(v: jax.Array, yaw: jax.Array) -> jax.Array:
     return jp.stack([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
 
 
+def wrench_to_yaw_frame(u: jax.Array, yaw: jax.Array) -> jax.Array:
+    """(..., 6) a world-frame wrench u = [f (N), tau (N·m)] in the yaw frame of heading `yaw`
+    (..., ) rad: [R_z(yaw)^T f, R_z(yaw)^T tau] (the same reference point; numpy or jax input)."""
+    c, s = jp.cos(yaw), jp.sin(yaw)
+    f_x, f_y, f_z, t_x, t_y, t_z = (u[..., i] for i in range(6))
+    return jp.stack(
+        [c * f_x + s * f_y, -s * f_x + c * f_y, f_z, c * t_x + s * t_y, -s * t_x + c * t_y, t_z],
+        axis=-1,
+    )
+
+
+def wrench_to_world(u: jax.Array, yaw: jax.Array) -> jax.Array:
+    """(..., 6) a yaw-frame wrench u (heading `yaw` (..., ) rad) in the world frame:
+    [R_z(yaw) f, R_z(yaw) tau], the inverse of `wrench_to_yaw_frame`."""
+    return wrench_to_yaw_frame(u, -yaw)
+
+
 def yaw_rotation(rot: jax.Array) -> jax.Array:
     """R_z (3, 3): the rotation about world z by the yaw of `rot` (3, 3) (the same matrix as
     rot_z(yaw_of(rot)), in `rot`'s dtype)."""

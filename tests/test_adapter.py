@@ -103,3 +103,25 @@ def test_adapter_errors_are_clear(data, trained):
         adapter.train("data.npz")
     with pytest.raises(DpcError, match="rows"):
         Dataset(data.s_body, data.s_arm[:10], data.p_arm, data.s_drp_next)
+
+
+def test_dagger_data_are_the_students_states_labelled_by_the_oracle(data):
+    """`collect` with a policy on a 'policy' env (DAgger): the episodes start as MBC's, then the
+    student's u (here a constant 30 N down) moves the robot to other states, and each row keeps
+    the oracle's u measured in the state the student visited."""
+    env = dpc_mjx.make("a1_arm/reaching", arm="regular", controller="policy")
+    n = _ENVS * 8
+
+    def student(obs, key):
+        del key
+        return jax.numpy.zeros(obs.shape[:-1] + (6,)).at[..., 2].set(-0.5)  # f_z = -30 N
+
+    own = adapter.collect(env, n, n_envs=_ENVS, chunk=8, progress=False, policy=student)
+    np.testing.assert_array_equal(own.s_body[:_ENVS], data.s_body[:_ENVS])  # same starts
+    assert not np.allclose(own.s_body[-_ENVS:], data.s_body[n - _ENVS : n])  # other states
+    assert own.u_oracle.shape == (n, 6) and np.isfinite(own.u_oracle).all()
+    assert own.u_obs.shape == (n, 6) and own.yaw.shape == (n,)
+    np.testing.assert_array_equal(own.u_oracle[:_ENVS], data.u_oracle[:_ENVS])
+    both = Dataset.concatenate([data, own])
+    assert len(both) == len(data) + n and both.env_steps == data.env_steps + own.env_steps
+    np.testing.assert_array_equal(both.u_oracle[len(data) :], own.u_oracle)

@@ -9,12 +9,14 @@ from helpers import FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
-from dpc_mjx.envs import base, registry, wrap_for_training
+from dpc_mjx.envs import base, observations, registry, wrap_for_training
 from dpc_mjx.envs.disturbances import DisturbanceSampler, make_sampler
+from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world, wrench_to_yaw_frame
 
 _BATCH = 2
 _TASK = "a1_arm/reaching"
 _REWARD_TOL = 1e-5
+_U_OBS_ATOL = 1e-4  # N, N·m: u_obs against the observer's estimate turned here (float32)
 _OBS_SIZES = {  # arm -> (s_arm, p_arm) sizes: 5 joints (4 hinges + finger) per WidowX-like arm
     "none": (0, 0),
     "regular": (10, 5),
@@ -65,15 +67,23 @@ def plain(request):
 def _check_layout(arm, env, states):
     s_arm, p_arm = _OBS_SIZES[arm]
     lay = env.obs_layout
-    assert env.observation_size == 11 + s_arm + p_arm == lay.size
+    assert env.observation_size == 11 + s_arm + p_arm + 6 == lay.size
+    assert lay.encoder_size == 11 + s_arm + p_arm
     assert env.action_size == 6
     for s in states:
         assert s.obs.shape == (_BATCH, env.observation_size)
         parts = lay.split(s.obs)
-        assert [parts[k].shape[-1] for k in ("s_body", "s_arm", "p_arm")] == [11, s_arm, p_arm]
+        sizes = [parts[k].shape[-1] for k in ("s_body", "s_arm", "p_arm", "u_obs")]
+        assert sizes == [11, s_arm, p_arm, 6]
+        # u_obs: the controller's disturbance-observer estimate (world) in the yaw frame
+        yaw = np.asarray(roll_pitch_yaw(s.pipeline_state.qpos[:, 3:7]))[:, 2]
+        estimate = s.info["ctrl"].observer.estimate
+        expected = np.asarray(wrench_to_yaw_frame(estimate, yaw))
+        np.testing.assert_allclose(parts["u_obs"], expected, atol=_U_OBS_ATOL, rtol=0)
         assert s.info["privileged"].shape == (_BATCH, dpc_mjx.envs.PRIVILEGED_SIZE)
         assert _finite((s.obs, s.reward, s.done, s.metrics, s.info["privileged"]))
         assert _finite(s.pipeline_state.qpos) and _finite(s.pipeline_state.qvel)
+    assert np.any(np.abs(states[-1].info["ctrl"].observer.estimate) > 1.0)  # N or N·m: not 0
     last = states[-1]
     assert np.all(last.done == 0), "a standing start should not fall or blow up in 60 ms"
     np.testing.assert_allclose(last.pipeline_state.time, 0.02 * (len(states) - 1), atol=1e-4)
@@ -100,10 +110,11 @@ def test_step_is_traced_once(regular):
 
 
 def test_reward_is_the_papers_formula(regular):
+    """Eqs. 2-4 on the true state (the observation is as measured: sensor errors)."""
     env, _, _, _, states = regular
     s = jax.device_get(states[-1])
-    sb = env.obs_layout.split(s.obs)["s_body"]  # (B, 11)
     d = s.pipeline_state
+    sb = np.asarray(jax.vmap(observations.s_body)(d, s.info["dist"].command))  # (B, 11), true
     for i in range(_BATCH):
         rot = np.zeros(9)
         mujoco.mju_quat2Mat(rot, np.asarray(d.qpos[i, 3:7], float))
@@ -223,3 +234,18 @@ def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
     monkeypatch.undo()
     with pytest.raises(DpcError, match="multiple of the physics step"):
         dpc_mjx.make(_TASK, arm="none", policy_dt=0.005)
+
+
+def test_yaw_frame_wrench_turns_with_the_heading():
+    """The policy's u in the yaw frame ('yaw', the default u_frame) reaches the controller turned
+    by the heading: a forward force at heading pi/2 is a world +y force, and back."""
+    u = np.array([[10.0, 0.0, -5.0, 1.0, 2.0, 0.5]])  # N, N·m in the yaw frame
+    world = np.asarray(wrench_to_world(u, np.array([np.pi / 2])))
+    np.testing.assert_allclose(world, [[0.0, 10.0, -5.0, -2.0, 1.0, 0.5]], atol=1e-5)
+    yaw = np.linspace(-3.0, 3.0, 7)
+    many = np.random.default_rng(0).normal(size=(7, 6))
+    back = wrench_to_yaw_frame(wrench_to_world(many, yaw), yaw)
+    np.testing.assert_allclose(back, many, atol=1e-5)
+    assert registry.get_config(_TASK).u_frame == "yaw"
+    with pytest.raises(DpcError, match=r"u_frame='body' is not valid; choose one of \['yaw'"):
+        registry.get_config(_TASK, u_frame="body")

@@ -1,52 +1,54 @@
-"""Evaluation stays what it was: a short evaluation of the shipped export against a recording.
+"""Evaluation stays what it was: short evaluations against two recordings.
 
-The recording (`tests/data/eval_regression.json`) was made at commit 84660d8, the last commit
-before the architecture refactor, with the evaluation code of that commit
-(`dpc_mjx.pipeline.evaluate_export` there, per-episode arrays of `envs.episodes.run_episodes`).
-Seed 4242 chose nothing. The episodes are short (100 env steps, 2 s), so that a change of arithmetic
-shows as a small drift of the continuous metrics rather than as other episodes; on one machine
-the evaluation is deterministic and the match is exact.
+`tests/data/eval_regression.json`, recorded at commit 84660d8 (before the architecture refactor,
+the sensor model and the yaw-frame policy): its MBC episodes are replayed with exact sensors and
+no delay (`sensor_noise=0, sensor_delay=0`), the envs as they were then: the sensor model,
+switched off, must change nothing (checked bit for bit for MBC and the oracle when the sensor
+model was added; one controller is enough to keep it so). Its DPC rows belonged to the export
+shipped then, which is gone.
+
+`tests/data/eval_regression_shipped.json`, recorded when the present export was shipped (see its
+`recorded` key): all four controllers on the shipped export with its env options (sensors on).
+
+Seed 4242 chose nothing. The episodes are short (100 env steps, 2 s), so that a change of
+arithmetic shows as a small drift of the continuous metrics rather than as other episodes; on
+one machine the evaluation is deterministic and the match is exact. Re-record the second file
+(only after a deliberate change of the shipped export) with
+`python tests/test_eval_regression.py --record`.
 """
 
 import csv
 import json
 import pathlib
+import sys
 
 import numpy as np
 import pytest
 
 from dpc_mjx import DpcError
 from dpc_mjx.envs.rollout import run_episodes
-from dpc_mjx.run.eval import EPISODE_COLUMNS
+from dpc_mjx.run.eval import EPISODE_COLUMNS, evaluate
 from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
 
-RECORDING = pathlib.Path(__file__).parent / "data" / "eval_regression.json"
+DATA = pathlib.Path(__file__).parent / "data"
+EXACT = DATA / "eval_regression.json"
+SHIPPED_RECORDING = DATA / "eval_regression_shipped.json"
 SEED, EPISODES, STEPS = 4242, 4, 100
 # Relative tolerance of returns and error sums: exact on the recording machine; another CPU's
 # XLA code may round differently, and 2 s of walking grows a 1e-7 difference to ~1e-5.
 RTOL = 1e-4
 ATOL = 1e-6  # for sums that are ~0 (an episode without error)
+# The env options of the 84660d8 recording: the reaching task then, with exact sensors
+EXACT_SENSORS = {"sensor_noise": 0.0, "sensor_delay": 0}
 
 
-@pytest.fixture(scope="module")
-def evaluated(tmp_path_factory):
-    path = tmp_path_factory.mktemp("eval") / "episodes.csv"
-    recording = json.loads(RECORDING.read_text())
+def _recording(path: pathlib.Path) -> dict:
+    recording = json.loads(path.read_text())
     assert (recording["seed"], recording["episodes"], recording["steps"]) == (SEED, EPISODES, STEPS)
-    per_episode = recording["per_episode"]
-    cells = evaluate_export(
-        SHIPPED,
-        controllers=list(per_episode),
-        episodes=EPISODES,
-        steps=STEPS,
-        seed=SEED,
-        csv=path,
-    )
-    return cells, per_episode, path
+    return recording["per_episode"]
 
 
-def test_shipped_export_evaluates_as_recorded(evaluated):
-    cells, recording, _ = evaluated
+def _assert_as_recorded(cells, recording: dict) -> None:
     assert [c.controller for c in cells] == list(recording)
     for cell in cells:
         for key, expected in recording[cell.controller].items():
@@ -54,6 +56,43 @@ def test_shipped_export_evaluates_as_recorded(evaluated):
             np.testing.assert_allclose(
                 got, expected, rtol=RTOL, atol=ATOL, err_msg=f"{cell.controller} {key}"
             )
+
+
+def _evaluate_shipped(csv_path=None, controllers=None):
+    return evaluate_export(
+        SHIPPED,
+        controllers=controllers or ["mbc", "observer", "dpc", "oracle"],
+        episodes=EPISODES,
+        steps=STEPS,
+        seed=SEED,
+        csv=csv_path,
+    )
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    path = tmp_path_factory.mktemp("eval") / "episodes.csv"
+    recording = _recording(SHIPPED_RECORDING)
+    return _evaluate_shipped(path, list(recording)), recording, path
+
+
+def test_shipped_export_evaluates_as_recorded(evaluated):
+    cells, recording, _ = evaluated
+    _assert_as_recorded(cells, recording)
+
+
+def test_exact_sensors_evaluate_as_the_envs_before_the_sensor_model():
+    recording = {"mbc": _recording(EXACT)["mbc"]}  # one controller shows the envs unchanged
+    cells = evaluate(
+        ["regular"],
+        list(recording),
+        episodes=EPISODES,
+        steps=STEPS,
+        seed=SEED,
+        overrides=EXACT_SENSORS,
+        progress=False,
+    )
+    _assert_as_recorded(cells, recording)
 
 
 def test_eval_writes_one_csv_row_per_episode(evaluated):
@@ -80,3 +119,33 @@ def test_eval_writes_one_csv_row_per_episode(evaluated):
 def test_run_episodes_rejects_an_empty_run_before_building_anything(episodes, steps):
     with pytest.raises(DpcError, match="episodes, steps and chunk >= 1"):
         run_episodes(None, episodes, steps)  # fails before the env is touched
+
+
+if __name__ == "__main__" and sys.argv[1:] == ["--record"]:
+    import datetime
+    import subprocess
+
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
+    cells = _evaluate_shipped()
+    SHIPPED_RECORDING.write_text(
+        json.dumps(
+            {
+                "recorded": f"{datetime.date.today()}, on top of {commit}",
+                "command": "python tests/test_eval_regression.py --record",
+                "seed": SEED,
+                "episodes": EPISODES,
+                "steps": STEPS,
+                "per_episode": {
+                    c.controller: {
+                        k: np.asarray(v, float).tolist() for k, v in sorted(c.per_episode.items())
+                    }
+                    for c in cells
+                },
+            },
+            indent=1,
+        )
+        + "\n"
+    )
+    print(f"recorded {SHIPPED_RECORDING}")

@@ -32,16 +32,23 @@ from dpc_mjx.adapter.networks import (
     encoder_module,
 )
 from dpc_mjx.envs.config import EnvConfig
-from dpc_mjx.envs.observations import S_BODY_NAMES
+from dpc_mjx.envs.observations import S_BODY_NAMES, U_OBS_NAMES
 from dpc_mjx.errors import DpcError
 from dpc_mjx.io import serialization as ser
 from dpc_mjx.io.inference import NumpyPolicy
 from dpc_mjx.robots import spec_json
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
 from dpc_mjx.robots.variants import VARIANTS
+from dpc_mjx.rotations import wrench_to_world
 from dpc_mjx.sac import checkpoint
 from dpc_mjx.sac.networks import make_networks
-from dpc_mjx.sac.policy import PolicyState, act
+from dpc_mjx.sac.policy import (
+    POLICY_INPUTS,
+    PolicyState,
+    act,
+    dpc_policy,
+    observation_size,
+)
 from dpc_mjx.sac.train import BestPolicy, Carry, SacConfig, TrainingState
 
 SHIPPED = pathlib.Path(dio.__file__).parent.parent / "artefacts" / "regular"
@@ -72,11 +79,12 @@ def _decoder(seed: int) -> DecoderState:
     return DecoderState(params=params, body_norm=_norm(k2, 11), target_norm=_norm(k3, 2))
 
 
-def _policy(seed: int) -> PolicyState:
-    obs_size = 11 + CONFIG.latent_size
+def _policy(seed: int, inputs: tuple[str, ...] = POLICY_INPUTS["paper"]) -> PolicyState:
+    obs_size = observation_size(inputs, CONFIG.latent_size)
     k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
     params = make_networks(obs_size, 6, HIDDEN).policy_network.init(k1)
-    return PolicyState(params=params, obs_norm=_norm(k2, obs_size), hidden=HIDDEN, action_size=6)
+    norm = _norm(k2, obs_size)
+    return PolicyState(params=params, obs_norm=norm, hidden=HIDDEN, action_size=6, inputs=inputs)
 
 
 def _obs(n_in: int, batch: int = 64, seed: int = 7) -> np.ndarray:
@@ -345,14 +353,56 @@ def test_numpy_policy_matches_jax(trained, exported):
         policy = NumpyPolicy(exported, arm)
         np.testing.assert_allclose(policy.latent(obs), z, atol=_NUMPY_TOL, rtol=0)
         np.testing.assert_allclose(policy.action(obs), a, atol=_NUMPY_TOL, rtol=0)
-        np.testing.assert_allclose(policy.u(obs), a * scale, atol=_NUMPY_TOL * 50.0, rtol=0)
+        # ENV_CONFIG's u_frame is 'yaw': u(obs, yaw) turns u_scale * a by the heading
+        yaw = np.linspace(-3.0, 3.0, len(obs))
+        u_world = wrench_to_world(a * scale, yaw)
+        np.testing.assert_allclose(policy.u(obs, yaw), u_world, atol=_NUMPY_TOL * 50.0, rtol=0)
         assert policy.action(obs[0]).shape == (6,) and policy.latent(obs[0]).shape == (2,)
-        np.testing.assert_allclose(policy.u(obs[3]), policy.u(obs)[3], atol=1e-12)
+        np.testing.assert_allclose(policy.u(obs[3], yaw[3]), policy.u(obs, yaw)[3], atol=1e-12)
+        with pytest.raises(ValueError, match=r"pass the heading, u\(obs, yaw\)"):
+            policy.u(obs)
+
+
+def test_observer_input_policy_round_trips_and_runs_in_numpy(trained, tmp_path):
+    """A policy on [s_body, z, u_obs]: the sidecar records its inputs and layout, `load` restores
+    it, and the numpy runner reads u_obs after the encoder's input, as the JAX policy does."""
+    policy = _policy(5, POLICY_INPUTS["observer"])
+    out = dio.export(
+        tmp_path / "observer",
+        adapter_config=CONFIG,
+        policy=policy,
+        decoder=trained["decoder"],
+        encoders={"regular": trained["encoders"]["regular"]},
+        arms={"regular": "regular"},
+        env_config=ENV_CONFIG,
+    )
+    meta = json.loads((out / "dpc.json").read_text())
+    assert meta["policy"]["inputs"] == ["s_body", "z", "u_obs"]
+    assert meta["policy"]["observation_size"] == 11 + 2 + 6
+    assert meta["policy"]["observation_layout"][-7:] == ["z_1", *U_OBS_NAMES]
+    assert meta["action_scaling"]["frame"] == "yaw"
+    loaded = dio.load(out)
+    assert loaded.policy.inputs == ("s_body", "z", "u_obs")
+    _assert_trees_equal(loaded.policy.params, policy.params)
+    obs = _obs(N_IN["regular"] + 6, seed=12)  # [s_body, s_arm, p_arm, u_obs]
+    a = np.asarray(dpc_policy(CONFIG, trained["encoders"]["regular"], loaded.policy)(obs, None))
+    z = encode(CONFIG, trained["encoders"]["regular"], obs[:, : N_IN["regular"]])
+    expected = act(policy, jp.concatenate([obs[:, :11], z, obs[:, -6:]], -1))
+    np.testing.assert_allclose(a, expected, atol=1e-6, rtol=0)
+    numpy_policy = NumpyPolicy(out, "regular")
+    np.testing.assert_allclose(numpy_policy.action(obs), a, atol=_NUMPY_TOL, rtol=0)
+    with pytest.raises(ValueError, match="has 32 entries per row"):
+        numpy_policy.action(obs[:, : N_IN["regular"]])  # u_obs missing: refused, not guessed
+    _edit_sidecar(lambda m: m["policy"].update(inputs=["s_body", "u_obs"]))(out)
+    with pytest.raises(DpcError, match=r"policy.inputs is \["):
+        dio.load(out)
 
 
 def test_numpy_policy_rejects_bad_input(exported, export_copy):
     policy = NumpyPolicy(exported, "regular")
-    with pytest.raises(ValueError, match=r"takes \(26,\) or \(B, 26\)"):
+    with pytest.raises(
+        ValueError, match=r"has 32 entries per row \(the encoder reads the first 26"
+    ):
         policy.action(np.zeros(29))
     obs = np.zeros((2, 26))
     obs[1, 4] = np.nan
@@ -387,7 +437,7 @@ mod = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(mod)
 for folder in ({str(exported)!r}, {str(SHIPPED)!r}):
     policy = mod.NumpyPolicy(folder, "regular")
-    assert policy.u(np.zeros(26)).shape == (6,)
+    assert policy.u(np.zeros(32), 0.5).shape == (6,)  # [s_body, s_arm, p_arm, u_obs], yaw
 assert "jax" not in sys.modules
 loaded = [m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib", "flax", "dpc_mjx")]
 assert not loaded, loaded
@@ -464,7 +514,7 @@ SIDECAR_DISAGREES = {  # one field of dpc.json against another (or this library)
     ),
     "adapter_config latent vs policy input": (
         _set("adapter_config", "latent_size", value=3),
-        ["dpc.json", "policy.observation_size=13", "latent_size (3) = 14", "re-export"],
+        ["dpc.json", "policy.observation_size=13", "latent_size (3) make 14", "re-export"],
     ),
     "decoder sees_body vs adapter_config": (
         _set("decoder", "sees_body", value=False),
@@ -602,7 +652,8 @@ def test_shipped_export_records_its_layout_and_old_sidecars_still_load(shipped_c
     _assert_trees_equal(old.policy, art.policy)
     a, a_old = art.dpc_policy("regular")(obs, None), old.dpc_policy("regular")(obs, None)
     np.testing.assert_array_equal(np.asarray(a), np.asarray(a_old))
-    np.testing.assert_array_equal(old_numpy.u(obs), numpy_policy.u(obs))
+    yaw = np.linspace(-1.0, 1.0, len(obs))
+    np.testing.assert_array_equal(old_numpy.u(obs, yaw), numpy_policy.u(obs, yaw))
     assert old_numpy.s_body == slice(0, 11)
 
 

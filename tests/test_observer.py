@@ -200,14 +200,16 @@ def test_without_a_wrench_the_estimate_is_the_legs_model_error(bench):
 
 
 def test_env_observer_follows_the_oracles_vertical_force():
-    """Standing, no pushes: the estimate's f_z is the oracle's (the arm's mount force) plus the
-    legs' term, to _ENV_FZ_TOL; the env steps finitely and ignores the action."""
+    """Standing, no pushes, exact sensors: the estimate's f_z is the oracle's (the arm's mount
+    force) plus the legs' term, to _ENV_FZ_TOL; the env steps finitely and ignores the action."""
     env = dpc_mjx.make(
         "a1_arm/reaching",
         arm="regular",
         controller="observer",
         gait="stand",
         push_force=(0.0, 0.0),
+        sensor_noise=0.0,
+        sensor_delay=0,
         **{k: (0.0, 0.0) for k in ("command_vx", "command_vy", "command_yaw")},
     )
     reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)

@@ -37,11 +37,16 @@ def test_run_config_rejects_unknown_or_invalid_options():
         RunConfig().replace(actor_init="pretrained")
     with pytest.raises(DpcError, match="samples"):
         RunConfig().replace(samples=0)
+    with pytest.raises(DpcError, match="policy_input='latent' is not one of"):
+        RunConfig().replace(policy_input="latent")
+    with pytest.raises(DpcError, match="trains nothing: set sac.num_timesteps"):
+        RunConfig().replace(actor_init="random")  # the default has no SAC stage
+    assert RunConfig().replace(actor_init="random", **{"sac.num_timesteps": 100_000})
 
 
 def test_cli_reports_bad_input_with_the_library_error(tmp_path, capsys):
     assert cli.main(["train", "--run", str(tmp_path / "r"), "--set", "sac.num_envs"]) == 2
-    assert "--set takes name=value" in capsys.readouterr().err
+    assert "Options take name=value" in capsys.readouterr().err
     assert cli.main(["eval", "--export", str(tmp_path / "missing")]) == 2
     assert "does not exist" in capsys.readouterr().err
     (tmp_path / "x").mkdir()
@@ -60,3 +65,7 @@ def test_shipped_artefacts_load_and_are_the_default_recipe():
     assert art.meta["sac_config"] == jsonable(dataclasses.asdict(defaults.sac))
     assert art.meta["adapter_config"] == jsonable(dataclasses.asdict(defaults.adapter))
     assert art.meta["extra"]["actor_init"] == defaults.actor_init
+    assert art.meta["extra"]["policy_input"] == defaults.policy_input == "paper"
+    assert art.policy.inputs == ("s_body", "z") and defaults.sac.num_timesteps == 0
+    env = art.meta["env_config"]  # the default reaching task: yaw-frame u, the robot's sensors
+    assert (env["u_frame"], env["sensor_noise"], env["sensor_delay"]) == ("yaw", 1.0, 1)

@@ -13,7 +13,16 @@ import dpc_mjx
 from dpc_mjx import DpcError
 from dpc_mjx.adapter import AdapterConfig, Dataset, EncoderState, Normalizer, encode
 from dpc_mjx.adapter.networks import encoder_module
-from dpc_mjx.sac import LatentObsWrapper, SacConfig, act, make_trainer, policy_state, train
+from dpc_mjx.rotations import wrench_to_world
+from dpc_mjx.sac import (
+    POLICY_INPUTS,
+    LatentObsWrapper,
+    SacConfig,
+    act,
+    make_trainer,
+    policy_state,
+    train,
+)
 from dpc_mjx.sac.warm_start import regress_actor
 
 _CONFIG = SacConfig(
@@ -41,7 +50,7 @@ class _Killed(Exception):
 def latent_env():
     env = dpc_mjx.make("a1_arm/reaching", arm="regular", episode_length=100)  # short evaluations
     config = AdapterConfig()
-    n_in = env.observation_size
+    n_in = env.obs_layout.encoder_size  # [s_body, s_arm, p_arm]
     params = encoder_module(config).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))
     encoder = EncoderState(params=params, input_norm=Normalizer(jp.zeros(n_in), jp.ones(n_in)))
     return env, LatentObsWrapper(env, config, encoder)
@@ -51,10 +60,19 @@ def test_latent_env_shows_the_policy_body_state_and_z(latent_env):
     env, wrapped = latent_env
     assert wrapped.observation_size == 11 + 2
     assert wrapped.action_size == 6
-    obs = jp.linspace(-1.0, 1.0, env.observation_size)
+    obs = jp.linspace(-1.0, 1.0, env.observation_size)  # [s_body, s_arm, p_arm, u_obs]
     out = wrapped.latent_obs(obs)
     np.testing.assert_array_equal(out[:11], obs[:11])
     assert np.all(np.abs(np.asarray(out[11:])) < 1.0)
+    # the 'observer' option appends u_obs, the raw observation's last 6 entries, after z
+    with_observer = LatentObsWrapper(
+        env, wrapped.adapter_config, wrapped.encoder, POLICY_INPUTS["observer"]
+    )
+    assert with_observer.observation_size == 11 + 2 + 6
+    out_obs = with_observer.latent_obs(obs)
+    np.testing.assert_array_equal(out_obs[:13], out)
+    np.testing.assert_array_equal(out_obs[13:], obs[env.obs_layout.u_obs])
+    np.testing.assert_array_equal(obs[env.obs_layout.u_obs], obs[-6:])
     wrong = EncoderState(params={}, input_norm=Normalizer(jp.zeros(3), jp.ones(3)))
     with pytest.raises(DpcError, match="encoder takes 3 inputs"):
         LatentObsWrapper(env, AdapterConfig(), wrong)
@@ -101,24 +119,36 @@ def test_resume_without_a_checkpoint_or_with_another_config_fails_clearly(latent
 
 
 def test_actor_warm_start_regresses_the_oracle_u(latent_env):
-    """Synthetic samples whose u_oracle is a function of s_body: the regressed actor's mean
-    reproduces it on held-out samples, and its exploration scale is the one asked for."""
+    """Synthetic samples whose u_oracle, in the yaw frame, is a function of s_body (and the world
+    frame's turns with a random heading): the regressed actor's mean reproduces the yaw-frame u
+    on held-out samples, and its exploration scale is the one asked for."""
     env, wrapped = latent_env
     trainer = make_trainer(wrapped, _CONFIG)
     carry = trainer.init(jax.random.PRNGKey(0))
     rng = np.random.default_rng(0)
     n, lay = 4096, env.obs_layout
-    obs = rng.normal(size=(n, env.observation_size)).astype(np.float32)
+    obs = rng.normal(size=(n, lay.encoder_size)).astype(np.float32)  # [s_body, s_arm, p_arm]
     u_scale = np.asarray(env.config.u_scale, np.float32)
     u = 0.5 * u_scale * np.tanh(obs[:, :6] - 0.5 * obs[:, 5:11])  # (n, 6) from s_body alone
-    data = Dataset(obs[:, lay.s_body], obs[:, lay.s_arm], obs[:, lay.p_arm], obs[:, :2], u_oracle=u)
+    yaw = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
+    u_world = np.asarray(wrench_to_world(u, yaw))
+    data = Dataset(
+        *(obs[:, lay.s_body], obs[:, lay.s_arm], obs[:, lay.p_arm], obs[:, :2]),
+        u_oracle=u_world,
+        u_obs=rng.normal(size=(n, 6)).astype(np.float32),  # not a policy input here
+        yaw=yaw,
+    )
     carry, report = regress_actor(
         trainer, carry, wrapped.adapter_config, wrapped.encoder, data, u_scale, epochs=60
     )
     assert report["samples"] == n and min(report["r2"]) > _WARM_START_R2, report
     policy = policy_state(trainer, carry.training.policy_params, carry.training.normalizer)
     held_out = obs[-8:]  # the last 10% are the regression's validation samples
-    z = encode(wrapped.adapter_config, wrapped.encoder, jp.asarray(held_out))
+    z = encode(
+        wrapped.adapter_config,
+        wrapped.encoder,
+        jp.asarray(held_out),
+    )
     action = np.asarray(act(policy, jp.concatenate([jp.asarray(held_out[:, :11]), z], -1)))
     np.testing.assert_allclose(action, u[-8:] / u_scale, atol=_WARM_START_ATOL)
     with pytest.raises(DpcError, match="u_oracle"):
@@ -130,3 +160,23 @@ def test_actor_warm_start_regresses_the_oracle_u(latent_env):
             dataclasses.replace(data, u_oracle=None),
             u_scale,
         )
+
+
+def test_no_sac_stage_returns_the_starting_actor_without_compiling_an_epoch(latent_env):
+    """sac.num_timesteps=0 (the default recipe): `train` applies actor_init and returns that
+    actor; nothing is trained, evaluated or compiled beyond the initial state."""
+    _, wrapped = latent_env
+    trainer = make_trainer(wrapped, dataclasses.replace(_CONFIG, num_timesteps=0))
+    marked = {}
+
+    def actor_init(trainer_, carry):
+        params = jax.tree.map(lambda x: x + 1.0, carry.training.policy_params)
+        marked["params"] = params
+        return carry.replace(training=carry.training.replace(policy_params=params))
+
+    result = train(trainer, progress=False, actor_init=actor_init)
+    assert result.history == [] and result.selected_epoch == 0
+    assert "epoch" not in trainer.compile_seconds and "evaluate" not in trainer.compile_seconds
+    for a, b in zip(jax.tree.leaves(result.policy.params), jax.tree.leaves(marked["params"])):
+        np.testing.assert_array_equal(a, b)
+    assert trainer.config.epochs == 0

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from dpc_mjx.run.stats import mcnemar_counts, mean_ci, paired_diff_ci, wilson_ci
+from dpc_mjx.run.eval import CellResult, paired_rows
+from dpc_mjx.run.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 
 TOL = 1e-9  # exact formulas: only float rounding
 
@@ -42,3 +43,33 @@ def test_mcnemar_counts_only_the_discordant_episodes():
     fell_a = np.array([1, 1, 0, 0, 1], bool)
     fell_b = np.array([1, 0, 1, 0, 0], bool)
     assert mcnemar_counts(fell_a, fell_b) == (2, 1)
+
+
+def test_exact_mcnemar_p_matches_the_binomial_test():
+    from scipy.stats import binomtest
+
+    for only_a, only_b in [(19, 2), (15, 8), (3, 3), (0, 7), (1, 0)]:
+        expected = binomtest(only_a, only_a + only_b, 0.5).pvalue
+        assert mcnemar_p(only_a, only_b) == pytest.approx(expected, rel=1e-12)
+    assert mcnemar_p(0, 0) == 1.0
+
+
+def _cell(controller: str, returns, fell) -> CellResult:
+    fell = np.asarray(fell, bool)
+    return CellResult(
+        *("regular", controller, len(fell), 100, int(fell.sum()), (0.0, 1.0), 0.0, (0.0, 0.0)),
+        *(0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0),
+        per_episode={"return": np.asarray(returns, float), "fell": fell},
+    )
+
+
+def test_paired_rows_compare_dpc_with_each_controller_on_the_same_episodes():
+    cells = [
+        _cell("mbc", [0.0, 1.0, 2.0, 3.0], [1, 1, 1, 0]),
+        _cell("dpc", [2.0, 3.0, 4.0, 5.0], [0, 1, 0, 0]),
+        _cell("oracle", [3.0, 4.0, 5.0, 6.0], [0, 0, 0, 0]),
+    ]
+    rows = paired_rows(cells)
+    assert rows[0].startswith("| regular: dpc - mbc | +2.0 [+2.0, +2.0] | 0 | 2 | 0.5 |")
+    assert rows[1].startswith("| regular: dpc - oracle | -1.0 [-1.0, -1.0] | 1 | 0 | 1 |")
+    assert "dpc closes 67% of the MBC-to-oracle gap" in rows[2]  # (3 - 1) / (3 - 0)

@@ -104,7 +104,8 @@ def wrapped():
 
 def _check(task, env, states):
     lay = env.obs_layout
-    assert env.observation_size == lay.size == 11 + 2 * len(env.lay.arm_dof) + len(env.lay.arm_act)
+    n_arm = 2 * len(env.lay.arm_dof) + len(env.lay.arm_act)
+    assert env.observation_size == lay.size == 11 + n_arm + 6  # [s_body, s_arm, p_arm, u_obs]
     for s in jax.device_get(states):
         assert s.obs.shape == (_BATCH, env.observation_size)
         assert set(s.metrics) >= set(base.METRICS) | _TASK_METRICS[task]

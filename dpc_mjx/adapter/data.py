@@ -6,7 +6,9 @@ body follows random velocity commands, the arm random reaching targets, under ra
 pushes and payloads (the env's `EnvConfig` distributions), with the env's low-level controller.
 For the adapter the env should be built with `controller="mbc"` (u = 0), so the data show the
 arm's effect on the body the policy will later correct; `collect` warns of nothing and takes any
-env whose observation is `[s_body, s_arm, p_arm]`.
+env whose observation is `[s_body, s_arm, p_arm, u_obs]`. Each row also keeps, for the policy's
+regression (`sac.warm_start`), the observer's estimate u_obs, the oracle's u (privileged) and the
+heading (to turn u into the yaw frame).
 
 s_drp = (roll rate, pitch rate): the trunk's angular velocity about its own x and y axes (rad/s,
 trunk frame, what an IMU's gyro reads), i.e. s_body[2:4] one env step (20 ms) later.
@@ -31,8 +33,11 @@ from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
 from dpc_mjx.envs.wrappers import wrap_for_training
 from dpc_mjx.errors import DpcError
 from dpc_mjx.progress import bar
+from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
 
 DRP = S_BODY_DRP  # roll and pitch rate (rad/s, trunk frame) inside s_body
+# The per-row columns of a `Dataset` (s_body first)
+_ROWS = ("s_body", "s_arm", "p_arm", "s_drp_next", "env_id", "u_oracle", "u_obs", "yaw")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,14 +50,17 @@ class Dataset:
     s_drp_next: np.ndarray  # (N, 2) rad/s, roll and pitch rate one env step later
     env_id: np.ndarray | None = None  # (N,) which of the batched envs a row came from
     # (N, 6) privileged, never an input of the adapter or the policy: the oracle's u at t, the
-    # measured mount wrench [f_a (N), tau_a (N·m)] about the A1 COM (`controller.oracle_u`)
+    # measured mount wrench [f_a (N), tau_a (N·m)] about the A1 COM (`controller.oracle_u`),
+    # world frame
     u_oracle: np.ndarray | None = None
+    u_obs: np.ndarray | None = None  # (N, 6) the observer's estimate at t, yaw frame (obs block)
+    yaw: np.ndarray | None = None  # (N,) rad, the trunk's heading at t (world frame <-> yaw frame)
     env_steps: int = 0  # env steps run to collect them (kept + dropped)
     seconds: float = 0.0  # wall time of the collection
 
     def __post_init__(self):
         n = len(self.s_body)
-        for name in ("s_arm", "p_arm", "s_drp_next", "env_id", "u_oracle"):
+        for name in _ROWS[1:]:
             if getattr(self, name) is not None and len(getattr(self, name)) != n:
                 raise DpcError(f"Dataset.{name} has {len(getattr(self, name))} rows, s_body {n}.")
 
@@ -64,15 +72,27 @@ class Dataset:
         """(N, n_in) the encoder's raw input [s_body, s_arm, p_arm] (an env observation)."""
         return np.concatenate([self.s_body, self.s_arm, self.p_arm], axis=1)
 
+    @property
+    def observation(self) -> np.ndarray:
+        """(N, n_in + 6) the raw env observation [s_body, s_arm, p_arm, u_obs]."""
+        if self.u_obs is None:
+            raise DpcError(
+                "This dataset has no u_obs column (collected before it existed); collect it again."
+            )
+        return np.concatenate([self.encoder_input, self.u_obs], axis=1)
+
+    def u_oracle_in(self, frame: str) -> np.ndarray:
+        """(N, 6) the oracle's u in `frame` ('world', or 'yaw': turned by the heading `yaw`)."""
+        if self.u_oracle is None or (frame == "yaw" and self.yaw is None):
+            raise DpcError("This dataset has no u_oracle (or yaw) column; collect it again.")
+        if frame == "world":
+            return self.u_oracle
+        return np.asarray(wrench_to_yaw_frame(self.u_oracle, self.yaw), np.float32)
+
     def take(self, rows: slice | np.ndarray) -> Dataset:
+        columns = {k: getattr(self, k) for k in _ROWS}
         return dataclasses.replace(
-            self,
-            s_body=self.s_body[rows],
-            s_arm=self.s_arm[rows],
-            p_arm=self.p_arm[rows],
-            s_drp_next=self.s_drp_next[rows],
-            env_id=None if self.env_id is None else self.env_id[rows],
-            u_oracle=None if self.u_oracle is None else self.u_oracle[rows],
+            self, **{k: None if v is None else v[rows] for k, v in columns.items()}
         )
 
     def save(self, path: str | pathlib.Path) -> None:
@@ -102,6 +122,20 @@ class Dataset:
         fields = {k: v for k, v in arrays.items() if k in names}
         return cls(**fields, env_steps=int(env_steps), seconds=float(seconds))
 
+    @classmethod
+    def concatenate(cls, parts: list[Dataset]) -> Dataset:
+        """The rows of `parts` in order (columns missing from any part are dropped; env_id is
+        kept as it is, so it names envs of several collections)."""
+        columns = {}
+        for name in _ROWS:
+            values = [getattr(p, name) for p in parts]
+            columns[name] = None if any(v is None for v in values) else np.concatenate(values)
+        return cls(
+            **columns,
+            env_steps=sum(p.env_steps for p in parts),
+            seconds=sum(p.seconds for p in parts),
+        )
+
     def split(self, val_fraction: float) -> tuple[Dataset, Dataset]:
         """(train, validation): the last `val_fraction` of the rows are held out (later in time,
         so validation episodes are mostly not seen in training)."""
@@ -118,9 +152,11 @@ def collect(
     seed: int = 0,
     chunk: int = 50,
     progress: bool = True,
+    policy: rollout.Policy = rollout.zero_policy,
 ) -> Dataset:
     """Exactly `samples` random-motion transitions from `n_envs` envs stepped in jitted chunks of
-    `chunk` env steps (actions 0: u = 0 for a 'policy' env, ignored by 'mbc')."""
+    `chunk` env steps, with actions from `policy` (default 0: u = 0 for a 'policy' env, ignored
+    by 'mbc'; a trained policy on a 'policy' env gives the student's own states, for DAgger)."""
     if not isinstance(samples, int) or samples < 1:
         raise DpcError(f"samples must be a positive int, got {samples!r}.")
     if not isinstance(n_envs, int) or n_envs < 1:
@@ -128,22 +164,23 @@ def collect(
     layout = env.unwrapped.obs_layout
     batched = wrap_for_training(env)
 
-    def record(before, after):  # the obs, its oracle u and the next roll/pitch rates
+    def record(before, after):  # the obs, its oracle u, heading and the next roll/pitch rates
         u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
+        yaw = jax.vmap(lambda q: roll_pitch_yaw(q)[2])(before.pipeline_state.qpos[:, 3:7])
         keep = after.done == 0.0  # the next obs is a successor of obs
-        return before.obs, u_oracle, after.obs[:, layout.s_body][:, DRP], keep
+        return before.obs, u_oracle, yaw, after.obs[:, layout.s_body][:, DRP], keep
 
     t0 = time.perf_counter()
-    key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the zero policy
+    key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the policy
     state = jax.jit(batched.reset)(jax.random.split(key, n_envs))
-    run_chunk = rollout.make_chunk(batched.step, rollout.zero_policy, chunk, record)
+    run_chunk = rollout.make_chunk(batched.step, policy, chunk, record)
     carry = (state, rollout.Tally.zeros(n_envs))
     ids = np.tile(np.arange(n_envs, dtype=np.int32), chunk)  # row order: (time, env)
     parts, kept, steps = [], 0, 0
     with bar(samples, "collect", "sample", progress) as pbar:
         for _, out in rollout.chunks(run_chunk, carry, key):
-            obs, u, drp, keep = (np.asarray(x).reshape(-1, *x.shape[2:]) for x in out)
-            parts.append((obs[keep], drp[keep], ids[keep], u[keep]))
+            obs, u, yaw, drp, keep = (np.asarray(x).reshape(-1, *x.shape[2:]) for x in out)
+            parts.append((obs[keep], drp[keep], ids[keep], u[keep], yaw[keep]))
             kept += int(keep.sum())
             steps += obs.shape[0]
             pbar.update(min(int(keep.sum()), samples - pbar.n))
@@ -153,6 +190,7 @@ def collect(
     drp = np.concatenate([p[1] for p in parts])[:samples].astype(np.float32)
     env_id = np.concatenate([p[2] for p in parts])[:samples]
     u_oracle = np.concatenate([p[3] for p in parts])[:samples].astype(np.float32)
+    yaw = np.concatenate([p[4] for p in parts])[:samples].astype(np.float32)
     return Dataset(
         s_body=obs[:, layout.s_body],
         s_arm=obs[:, layout.s_arm],
@@ -160,6 +198,8 @@ def collect(
         s_drp_next=drp,
         env_id=env_id,
         u_oracle=u_oracle,
+        u_obs=obs[:, layout.u_obs],
+        yaw=yaw,
         env_steps=steps,
         seconds=time.perf_counter() - t0,
     )

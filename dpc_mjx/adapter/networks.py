@@ -182,7 +182,8 @@ def decoder_template(config: AdapterConfig) -> DecoderState:
 
 
 def encode(config: AdapterConfig, enc: EncoderState, obs: jax.Array) -> jax.Array:
-    """z (..., latent_size) from a raw observation `[s_body, s_arm, p_arm]` (..., n_in)."""
+    """z (..., latent_size) from the arm observation `[s_body, s_arm, p_arm]` (..., n_in): the
+    first n_in entries of a raw env observation."""
     return encoder_module(config).apply(enc.params, enc.input_norm(obs))
 
 

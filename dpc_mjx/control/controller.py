@@ -25,7 +25,7 @@ import jax.numpy as jp
 import mujoco
 from flax import struct
 
-from dpc_mjx.control import balance, gait, qp, swing
+from dpc_mjx.control import balance, gait, qp, sensors, swing
 from dpc_mjx.control import observer as observer_lib
 from dpc_mjx.control.state import BodyState, StateIndex, read_state, state_index
 from dpc_mjx.robots.a1 import FOOT_RADIUS
@@ -111,10 +111,15 @@ class LowLevelController:
         cfg = self.config
         return observer_lib.update(cfg.observer, cfg.balance, cs.observer, s, cs.forces, self.dt)
 
-    def plan(self, cs: ControllerState, d, command: jax.Array) -> Plan:
-        """Read the state, the gait schedule and the desired body motion of this tick."""
+    def plan(
+        self, cs: ControllerState, d, command: jax.Array, noise: sensors.SensorNoise | None = None
+    ) -> Plan:
+        """Read the state (with the measurement errors `noise`, `control/sensors.py`; None:
+        exact), the gait schedule and the desired body motion of this tick."""
         cfg = self.config
         s = read_state(self.idx, d)
+        if noise is not None:
+            s = sensors.measured(s, noise)
         stance, progress = gait.contact_schedule(cfg.gait, cs.t)
         # Desired body motion: integrate the command, keep the tracking error bounded.
         yaw_des = cs.yaw_des + command[2] * self.dt
@@ -151,13 +156,15 @@ class LowLevelController:
         command: jax.Array,
         u: jax.Array | None,
         arm_targets: jax.Array | None = None,
+        noise: sensors.SensorNoise | None = None,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
-        the disturbance observer's estimate of this tick (the `observer` controller).
+        the disturbance observer's estimate of this tick (the `observer` controller); `noise`
+        the measurement errors of this tick (`control/sensors.py`; None: exact sensors).
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
         cfg = self.config
-        p = self.plan(cs, d, command)
+        p = self.plan(cs, d, command, noise)
         s, stance, progress, vel_des = p.state, p.stance, p.progress, p.vel_des
         observed = self._observe(cs, s)  # this tick's data, the previous tick's forces
         prob = self.balance_qp(p, observed.estimate if u is None else u)

@@ -4,17 +4,21 @@ One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller 
 at the physics rate (250 Hz), with u chosen by `config.controller`:
 
     'policy': u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)       (DPC)
+              in the yaw frame (turned to the world at each tick) or the world frame
+              (`EnvConfig.u_frame`)
     'mbc'   : u = 0, the action is ignored                                       (paper baseline)
     'oracle': u = measured arm-mount wrench (`controller.oracle_u`), action ignored
     'observer': u = the momentum observer's estimate (`control/observer.py`), action ignored
 
 State (brax `State`):
     pipeline_state  mjx.Data
-    obs             (obs_size,) [s_body, s_arm, p_arm], slices in `env.obs_layout`
+    obs             (obs_size,) [s_body, s_arm, p_arm, u_obs], slices in `env.obs_layout`
     reward          () paper eq. 4 (+ `fall_penalty` on the falling step; 0 on a NaN reset)
     done            () 1.0 on a fall or a non-finite/exploded state
     metrics         per-step terms (see `METRICS`); wrappers add keys, so we never drop any
     info            'rng' (2,) key; 'ctrl' ControllerState; 'dist' Disturbances;
+                    'sensor_bias' SensorNoise, this episode's sensor biases; 'ctrl_queue'
+                    (sensor_delay, nu) ctrl computed but not yet applied (`control/sensors.py`);
                     'privileged' (10,) [u_oracle, payload, ee_force] (`observations.PRIVILEGED`);
                     'nan_reset' () 1.0 when this step was non-finite or exploded;
                     'objects' (n_obj, 3) m, world positions of the scene's free objects (box,
@@ -45,7 +49,7 @@ from brax.envs.base import Env, State
 from mujoco import mjx
 
 from dpc_mjx import sim
-from dpc_mjx.control import gait
+from dpc_mjx.control import gait, sensors
 from dpc_mjx.control.controller import make_controller, oracle_u
 from dpc_mjx.control.state import has_fallen
 from dpc_mjx.envs import observations, rewards
@@ -56,7 +60,7 @@ from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.objects import prop_layout
 from dpc_mjx.robots.variants import Arm, RobotSpec
-from dpc_mjx.rotations import yaw_of
+from dpc_mjx.rotations import wrench_to_world, yaw_of
 
 ACTION_SIZE = 6  # u = [f_a (3), tau_a (3)]
 # Per-step metrics (summed over an episode by brax's EpisodeWrapper):
@@ -152,7 +156,10 @@ class DpcEnv(Env):
         return self.config.policy_dt
 
     def reset(self, rng: jax.Array) -> State:
-        rng, k_pose, k_dist = jax.random.split(rng, 3)
+        if self._sensing:
+            rng, k_pose, k_dist, k_bias = jax.random.split(rng, 4)
+        else:  # exact sensors: the key stream of the envs before the sensor model
+            rng, k_pose, k_dist = jax.random.split(rng, 3)
         model, lay, cfg = self.model, self.lay, self.config
         qpos = jp.asarray(model.key_qpos[0], jp.float32)
         noise = jax.random.uniform(  # leg joints ~ U(-joint_noise, joint_noise) rad
@@ -164,46 +171,67 @@ class DpcEnv(Env):
         d = mjx.make_data(self.mx).replace(qpos=qpos, ctrl=ctrl)
         d = mjx.forward(self.mx, d)
         d = d.replace(ctrl=ctrl.at[lay.arm_act].set(self.arm_targets(dist, jp.zeros(()), d)))
+        n_arm = len(lay.arm_dof)
+        if self._sensing:
+            bias = sensors.draw_bias(k_bias, n_arm, cfg.sensor_noise)
+        else:
+            bias = sensors.zeros(n_arm)
         info = {
             "rng": rng,
             "ctrl": self.controller.init(d),
             "dist": dist,
             "privileged": self._privileged(d, dist),
             "nan_reset": jp.zeros(()),
+            "sensor_bias": bias,
+            "ctrl_queue": jp.tile(d.ctrl, (cfg.sensor_delay, 1)),  # (delay, nu) not yet applied
             **self._objects(d),
         }
         metrics = {k: jp.zeros(()) for k in METRICS} | self.task_metrics(d)
-        obs = observations.observation(lay, d, dist.command)
+        obs = observations.observation(lay, d, dist.command, info["ctrl"].observer.estimate)
+        obs = self._measured(obs, bias)
         return State(d, obs, jp.zeros(()), jp.zeros(()), metrics, info)
 
     def step(self, state: State, action: jax.Array) -> State:
         d0, info = state.pipeline_state, state.info
-        rng, key = jax.random.split(info["rng"])
+        if self._sensing:
+            rng, key, k_sense = jax.random.split(info["rng"], 3)
+            tick_keys = jax.random.split(k_sense, self.n_substeps)
+        else:  # exact sensors: the key stream of the envs before the sensor model
+            rng, key = jax.random.split(info["rng"])
+            tick_keys = None
         dist = self.sampler.advance(info["dist"], d0.time, key)
+        bias, scale = info["sensor_bias"], self.config.sensor_noise
         command = dist.command
         u_policy = self._u_scale * jp.clip(action, -1.0, 1.0)
 
-        def substep(carry, _):
-            d, cs = carry
+        def substep(carry, tick_key):
+            d, cs, queue, _ = carry
+            noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
             if self.config.controller == "mbc":
                 u = jp.zeros(ACTION_SIZE)
             elif self.config.controller == "oracle":
                 u = oracle_u(self.lay, d, self._com_pos(d))
             elif self.config.controller == "observer":
                 u = None  # the controller's own observer estimate of this tick
+            elif self.config.u_frame == "yaw":  # the policy's u turns with the heading
+                u = wrench_to_world(u_policy, self._yaw(d))
             else:
                 u = u_policy
             targets = self.arm_targets(dist, d.time, d)
-            cs, ctrl = self.controller.step(cs, d, command, u, targets)
+            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise)
+            if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
+                ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
             xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
             d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time)
             d = mjx.step(self.mx, d)
-            return (d, cs), None
+            return (d, cs, queue, bias if noise is None else noise), None
 
-        (d, cs), _ = jax.lax.scan(substep, (d0, info["ctrl"]), None, length=self.n_substeps)
+        carry = (d0, info["ctrl"], info["ctrl_queue"], bias)
+        (d, cs, queue, noise), _ = jax.lax.scan(substep, carry, tick_keys, length=self.n_substeps)
 
-        obs = observations.observation(self.lay, d, command)
-        sb = obs[self.obs_layout.s_body]
+        true_obs = observations.observation(self.lay, d, command, cs.observer.estimate)
+        obs = self._measured(true_obs, noise)  # what the policy reads
+        sb = true_obs[self.obs_layout.s_body]  # the reward, the fall test and metrics: true
         vel = jp.stack([sb[5], sb[6], observations.world_yaw_rate(sb)])
         r = rewards.total_reward(vel, command, sb[:2], jp.zeros(2))  # desired roll = pitch = 0
         fall = has_fallen(d.qpos[2], sb[:2])
@@ -238,6 +266,7 @@ class DpcEnv(Env):
             **info,
             "rng": rng,
             "ctrl": cs,
+            "ctrl_queue": keep(queue, info["ctrl_queue"]),
             "dist": dist,
             "privileged": jp.where(bad, 0.0, privileged),
             "nan_reset": bad.astype(jp.float32),
@@ -253,6 +282,20 @@ class DpcEnv(Env):
         )
 
     # helpers --------------------------------------------------------------------------------
+
+    @property
+    def _sensing(self) -> bool:
+        """Whether sensors have errors (`EnvConfig.sensor_noise` > 0): draws keys for them."""
+        return self.config.sensor_noise > 0
+
+    def _measured(self, obs: jax.Array, noise: sensors.SensorNoise) -> jax.Array:
+        """The true observation `obs` as measured: s_body and s_arm with the errors `noise` of
+        the last tick (`control/sensors.py`); u_obs is the observer's, from measured states."""
+        if not self._sensing:
+            return obs
+        lay = self.obs_layout
+        s_body, s_arm = sensors.observe(obs[lay.s_body], obs[lay.s_arm], noise)
+        return obs.at[lay.s_body].set(s_body).at[lay.s_arm].set(s_arm)
 
     def _objects(self, d) -> dict[str, jax.Array]:
         """{'objects': (n_obj, 3) m, world} for scenes with free objects, else {}."""

@@ -15,6 +15,7 @@ from typing import Any
 from dpc_mjx.errors import DpcError
 
 CONTROLLERS = ("policy", "mbc", "oracle", "observer")
+U_FRAMES = ("yaw", "world")
 GAITS = ("trot", "stand")
 
 
@@ -30,17 +31,29 @@ class EnvConfig:
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
 
     # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]]
-    # (per axis x, y, z; world frame, about the A1 COM, the controller's convention). A number
-    # applies to all three axes. The defaults bound the oracle's u on the reaching task with
-    # margin (its std there: f 2.6, 2.6, 19 N around a mean f_z of -10 N; tau 3.8, 4.0,
-    # 0.44 N·m), so exploration does not throw the robot around with forces no arm exerts.
-    # The oracle's own u is not clipped.
+    # (per axis x, y, z of `u_frame`; about the A1 COM). A number applies to all three axes.
+    # The defaults bound the oracle's u on the reaching task with margin (its std there: f 2.6,
+    # 2.6, 19 N around a mean f_z of -10 N; tau 3.8, 4.0, 0.44 N·m), so exploration does not
+    # throw the robot around with forces no arm exerts. The oracle's own u is not clipped.
+    #
+    # The frame of the policy's u: 'yaw' (heading-aligned, z up; turned to the world frame, the
+    # controller's, at every tick), or 'world' (the exports written before this option existed).
+    # The policy observes nothing of the heading (s_body and u_obs are yaw-frame), so only a
+    # yaw-frame u can follow the arm's moments as the robot turns (docs/results.md, ablation).
+    u_frame: str = "yaw"
     max_force: float | tuple[float, float, float] = (15.0, 15.0, 60.0)  # N
     max_torque: float | tuple[float, float, float] = (12.0, 12.0, 3.0)  # N·m
 
     # Reward (paper eqs. 2-4, fixed weights in `rewards`) and termination.
     fall_penalty: float = -1000.0  # added on the step that falls (see `reaching.py` for why)
     explode_speed: float = 500.0  # m/s or rad/s: |qvel| above this is an exploded state (reset)
+
+    # Sensors (`control/sensors.py`): measurement errors of the IMU, the velocity estimate and
+    # the joint encoders, as a multiple of the documented robot values there (0: exact
+    # sensors), the same for every controller, in what the controller, the observer and the
+    # policy read; and the delay from measurement to torque, in 4 ms ticks.
+    sensor_noise: float = 1.0
+    sensor_delay: int = 1
 
     # Initial state: home pose, leg joints offset ~ U(-joint_noise, joint_noise) rad.
     joint_noise: float = 0.05
@@ -101,12 +114,14 @@ class EnvConfig:
         """Raise `DpcError` naming the first invalid field and what it must be."""
         _choice("controller", self.controller, CONTROLLERS)
         _choice("gait", self.gait, GAITS)
+        _choice("u_frame", self.u_frame, U_FRAMES)
+        _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
+        _int("sensor_delay", self.sensor_delay, 0, 10)
         for name in ("max_force", "max_torque"):
             _axes(name, getattr(self, name))
         for name in ("policy_dt", "explode_speed", "reach_move_time"):
             _positive(name, getattr(self, name))
-        if not isinstance(self.episode_length, int) or self.episode_length <= 0:
-            raise DpcError(f"episode_length must be a positive int, got {self.episode_length!r}.")
+        _int("episode_length", self.episode_length, 1)
         _number("fall_penalty", self.fall_penalty)
         _number("joint_noise", self.joint_noise, low=0.0)
         _number("reach_fraction", self.reach_fraction, low=0.0, high=1.0)
@@ -136,6 +151,11 @@ class EnvConfig:
 def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
     if value not in choices:
         raise DpcError(f"{name}={value!r} is not valid; choose one of {list(choices)}.")
+
+
+def _int(name: str, value: Any, low: int, high: float = math.inf) -> None:
+    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
+        raise DpcError(f"{name} must be an int in [{low}, {high}], got {value!r}.")
 
 
 def _number(name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:

@@ -5,12 +5,18 @@
                   the yaw frame, yaw rate rad/s)
     s_arm  (2 n,): arm joint positions (rad or m), then velocities, every arm joint in layout order
     p_arm  (n_act,): the arm servos' desired joint positions (the reference motion)
+    u_obs  (6,): the disturbance observer's estimate of the external wrench on the A1
+                 (`control/observer.py`: IMU, encoders and the commanded foot forces, no force
+                 sensor), in the yaw frame: [f (N), tau (N·m) about the A1 COM]
 
 `s_body` has the same layout for every variant; `s_arm`/`p_arm` follow the arm (n = 0 for the
-bare A1). Works on `mujoco.MjData` and `mjx.Data` (numpy or jax arrays).
+bare A1); `u_obs` is arm-agnostic (what a policy shared by every arm may see). Works on
+`mujoco.MjData` and `mjx.Data` (numpy or jax arrays).
 
-An env's observation is `[s_body, s_arm, p_arm]` (`ObsLayout` gives the slices); the privileged
-block (never seen by the policy) is `[u_oracle (6), payload (1), ee_force (3)]` (`PRIVILEGED`).
+An env's observation is `[s_body, s_arm, p_arm, u_obs]` (`ObsLayout` gives the slices); an
+encoder reads its first `ObsLayout.encoder_size` entries `[s_body, s_arm, p_arm]`, the paper's
+arm observation. The privileged block (never seen by the policy) is `[u_oracle (6), payload (1),
+ee_force (3)]` (`PRIVILEGED`).
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import jax
 import jax.numpy as jp
 
 from dpc_mjx.robots.layout import Layout
-from dpc_mjx.rotations import roll_pitch_yaw, to_yaw_frame
+from dpc_mjx.rotations import roll_pitch_yaw, to_yaw_frame, wrench_to_yaw_frame
 
 # s_body's entries, in order (units and frames as in the module docstring); the exports record it
 S_BODY_NAMES = (
@@ -33,6 +39,9 @@ S_BODY_NAMES = (
 S_BODY_SIZE = len(S_BODY_NAMES)  # 11
 # Roll and pitch rate (wx, wy; rad/s, trunk frame) inside s_body: the adapter decoder's target.
 S_BODY_DRP = slice(S_BODY_NAMES.index("wx"), S_BODY_NAMES.index("wy") + 1)
+# u_obs's entries, in order: force (N), torque about the A1 COM (N·m), yaw frame
+U_OBS_NAMES = ("obs_fx", "obs_fy", "obs_fz", "obs_tx", "obs_ty", "obs_tz")
+U_OBS_SIZE = len(U_OBS_NAMES)  # 6, the last entries of every env observation
 # Privileged block: the measured mount wrench u = [f_a (N), tau_a (N·m)] about the A1 COM, world
 # frame (`controller.oracle_u`); total payload mass (kg); total force applied at the end
 # effectors by pushes, payload weight excluded (N, world).
@@ -42,7 +51,7 @@ PRIVILEGED_SIZE = 10
 
 @dataclasses.dataclass(frozen=True)
 class ObsLayout:
-    """Slices of the flat observation `[s_body (11), s_arm (2 n), p_arm (n_act)]`."""
+    """Slices of the flat observation `[s_body (11), s_arm (2 n), p_arm (n_act), u_obs (6)]`."""
 
     n_arm_joints: int  # n
     n_arm_act: int
@@ -60,12 +69,21 @@ class ObsLayout:
         return slice(self.s_arm.stop, self.s_arm.stop + self.n_arm_act)
 
     @property
-    def size(self) -> int:
+    def u_obs(self) -> slice:
+        return slice(self.p_arm.stop, self.p_arm.stop + U_OBS_SIZE)
+
+    @property
+    def encoder_size(self) -> int:
+        """Entries of `[s_body, s_arm, p_arm]`, the encoder's input (a prefix of the obs)."""
         return self.p_arm.stop
 
+    @property
+    def size(self) -> int:
+        return self.u_obs.stop
+
     def split(self, obs: jax.Array) -> dict[str, jax.Array]:
-        """{'s_body', 's_arm', 'p_arm'} views of `obs` (..., size)."""
-        return {k: obs[..., getattr(self, k)] for k in ("s_body", "s_arm", "p_arm")}
+        """{'s_body', 's_arm', 'p_arm', 'u_obs'} views of `obs` (..., size)."""
+        return {k: obs[..., getattr(self, k)] for k in ("s_body", "s_arm", "p_arm", "u_obs")}
 
     @classmethod
     def of(cls, lay: Layout) -> ObsLayout:
@@ -93,9 +111,16 @@ def p_arm(lay: Layout, d) -> jax.Array:
     return jp.asarray(d.ctrl[lay.arm_act])
 
 
-def observation(lay: Layout, d, command: jax.Array) -> jax.Array:
-    """The flat observation `[s_body, s_arm, p_arm]` (see `ObsLayout`)."""
-    return jp.concatenate([s_body(d, command), s_arm(lay, d), p_arm(lay, d)])
+def u_obs(d, estimate: jax.Array) -> jax.Array:
+    """(6,) the observer's `estimate` (6,) (world frame, `ObserverState.estimate`) in the yaw
+    frame of the trunk."""
+    return wrench_to_yaw_frame(estimate, roll_pitch_yaw(d.qpos[3:7])[2])
+
+
+def observation(lay: Layout, d, command: jax.Array, estimate: jax.Array) -> jax.Array:
+    """The flat observation `[s_body, s_arm, p_arm, u_obs]` (see `ObsLayout`); `estimate` (6,)
+    the disturbance observer's, world frame."""
+    return jp.concatenate([s_body(d, command), s_arm(lay, d), p_arm(lay, d), u_obs(d, estimate)])
 
 
 def world_yaw_rate(s_body_: jax.Array) -> jax.Array:

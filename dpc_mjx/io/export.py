@@ -62,6 +62,7 @@ def export(
         adapter_config=adapter_config,
         policy_hidden=hidden,
         action_size=int(policy.action_size),
+        policy_inputs=tuple(policy.inputs),
         encoders=entries,
         env_config=env_config,
         sac_config=sac_config,
@@ -79,10 +80,12 @@ def export(
     sidecar.check_records(declared)
     check_tree(
         policy,
-        policy_template(declared.observation_size, hidden, declared.action_size),
+        policy_template(
+            declared.observation_size, hidden, declared.action_size, declared.policy_inputs
+        ),
         "policy",
-        f"The policy observes [s_body ({declared.s_body.stop - declared.s_body.start}), z "
-        f"({adapter_config.latent_size})]; pass the policy trained with this adapter.",
+        f"The policy observes {list(declared.policy_inputs)} ({declared.observation_size} "
+        f"values, z of {adapter_config.latent_size}); pass the policy trained with this adapter.",
     )
     check_tree(
         decoder,

@@ -5,15 +5,21 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
 `dpc_mjx.io.export`:
 
     policy = NumpyPolicy("export/", arm="regular")
-    u = policy.u(obs)   # obs = [s_body, s_arm (2 n), p_arm (n_act)], the raw env observation
+    u = policy.u(obs, yaw)   # obs = [s_body, s_arm (2 n), p_arm (n_act), u_obs (6)], the raw
+                             # env observation; yaw (rad) the heading; u in the world frame
 
-    z = tanh(E((obs - mean_E) / std_E))                                  latent (latent_size,)
-    a = tanh(pi(([s_body, z] - mean_pi) / std_pi)[:action_size])         action in [-1, 1]^6
-    u = u_scale * a: [f_a (N), tau_a (N m)], per component                world frame, about the COM
+    z = tanh(E((obs[:input_size] - mean_E) / std_E))                     latent (latent_size,)
+    x = [s_body, z] or [s_body, z, u_obs]                                policy.inputs
+    a = tanh(pi((x - mean_pi) / std_pi)[:action_size])                    action in [-1, 1]^6
+    u = u_scale * a: [f_a (N), tau_a (N m)], per component, about the COM, in the frame
+        action_scaling.frame: 'yaw' (heading-aligned; `u(obs, yaw)` turns it to the world
+        frame) or 'world'
 
 Every size and the layout come from the sidecar: s_body = obs[start:stop] with
 `observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
-first, policy.observation_size - latent_size long).
+first, policy.observation_size - latent_size long); u_obs = obs[input_size:input_size + 6], the
+disturbance observer's estimate (yaw frame); a policy whose inputs lack u_obs also takes obs
+without it (input_size long).
 
 E and pi are ReLU MLPs (Dense layers `hidden_0 .. hidden_k`, then `out` for E; the last
 `hidden_k` is pi's output). The msgpack files use flax's format: a dict tree whose arrays are
@@ -33,6 +39,7 @@ import numpy as np
 FORMAT_VERSION = 1  # the export format read here; equal to dpc_mjx.io.FORMAT_VERSION
 SIDECAR = "dpc.json"  # equal to dpc_mjx.io.SIDECAR
 _NDARRAY_EXT = 1  # flax's msgpack ExtType code of an ndarray
+_U_OBS_SIZE = 6  # u_obs, the last block of a raw env observation (dpc_mjx.envs.observations)
 
 
 def _ext_hook(code: int, data: bytes) -> np.ndarray:
@@ -142,8 +149,11 @@ class NumpyPolicy:
             pol, scaling, encoders = meta["policy"], meta["action_scaling"], meta["encoders"]
             hidden, action_size = [int(h) for h in pol["hidden"]], int(pol["action_size"])
             u_scale = [float(v) for v in scaling["u_scale"]]  # (6,) N, N·m per unit action
-            obs_size = int(pol["observation_size"])  # [s_body, z]
-            s_body = _s_body(meta, obs_size - latent)
+            obs_size = int(pol["observation_size"])  # the policy's observation
+            inputs = list(pol.get("inputs", ["s_body", "z"]))  # older sidecars: [s_body, z]
+            n_obs = _U_OBS_SIZE if "u_obs" in inputs else 0
+            frame = str(scaling.get("frame", "world"))  # older sidecars: world
+            s_body = _s_body(meta, obs_size - latent - n_obs)
             enc = encoders.get(arm)
             if enc is not None:
                 input_size = int(enc["input_size"])  # [s_body, s_arm, p_arm] of this arm
@@ -164,13 +174,16 @@ class NumpyPolicy:
             )
         self.meta, self.arm, self.input_size = meta, arm, input_size
         self.latent_size, self.action_size = latent, action_size
+        self.inputs, self.frame = inputs, frame
         self.s_body = s_body  # of the observation
         n_body = s_body.stop - s_body.start
-        if n_body + latent != obs_size or s_body.stop > input_size:
+        known = inputs in (["s_body", "z"], ["s_body", "z", "u_obs"]) and frame in ("yaw", "world")
+        if not known or n_body + latent + n_obs != obs_size or s_body.stop > input_size:
             raise ValueError(
-                f"{d / SIDECAR}: s_body = obs[{s_body.start}:{s_body.stop}] and latent_size "
-                f"{latent} do not fit policy.observation_size {obs_size} and the encoder's input "
-                f"size {input_size}; re-export the artefacts."
+                f"{d / SIDECAR}: s_body = obs[{s_body.start}:{s_body.stop}], latent_size "
+                f"{latent}, policy.inputs {inputs} and action_scaling.frame {frame!r} do not fit "
+                f"policy.observation_size {obs_size} and the encoder's input size {input_size}; "
+                "re-export the artefacts."
             )
         if len(u_scale) != action_size:
             raise ValueError(
@@ -206,11 +219,14 @@ class NumpyPolicy:
 
     def _obs(self, obs) -> np.ndarray:
         x = np.asarray(obs, np.float64)
-        if x.ndim not in (1, 2) or x.shape[-1] != self.input_size:
+        sizes = [self.input_size + _U_OBS_SIZE]
+        if "u_obs" not in self.inputs:
+            sizes.append(self.input_size)
+        if x.ndim not in (1, 2) or x.shape[-1] not in sizes:
             raise ValueError(
-                f"Observation of shape {x.shape}: the encoder of arm {self.arm!r} takes "
-                f"({self.input_size},) or (B, {self.input_size}) = [s_body, s_arm, p_arm] of that "
-                "arm's env; pass that arm's raw observation."
+                f"Observation of shape {x.shape}: arm {self.arm!r}'s raw env observation "
+                f"[s_body, s_arm, p_arm, u_obs] has {sizes[0]} entries per row (the encoder reads "
+                f"the first {self.input_size}); pass that arm's raw observation, (n,) or (B, n)."
             )
         bad = ~np.isfinite(x)
         if bad.any():
@@ -222,7 +238,7 @@ class NumpyPolicy:
 
     def _latent(self, x: np.ndarray) -> np.ndarray:
         mean, std = self._enc_norm
-        return np.tanh(_forward(self._enc, (x - mean) / std))
+        return np.tanh(_forward(self._enc, (x[..., : self.input_size] - mean) / std))
 
     def latent(self, obs) -> np.ndarray:
         """z (..., latent_size) in (-1, 1)."""
@@ -231,17 +247,34 @@ class NumpyPolicy:
     def action(self, obs) -> np.ndarray:
         """Deterministic action a (..., action_size) in [-1, 1]: the actor's mode."""
         x = self._obs(obs)
-        pi_in = np.concatenate([x[..., self.s_body], self._latent(x)], axis=-1)
+        blocks = {
+            "s_body": x[..., self.s_body],
+            "z": self._latent(x),
+            "u_obs": x[..., self.input_size : self.input_size + _U_OBS_SIZE],
+        }
+        pi_in = np.concatenate([blocks[k] for k in self.inputs], axis=-1)
         mean, std = self._pi_norm
         return np.tanh(_forward(self._pi, (pi_in - mean) / std)[..., : self.action_size])
 
-    def u(self, obs) -> np.ndarray:
-        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6), world frame, about the A1 COM."""
+    def u(self, obs, yaw=None) -> np.ndarray:
+        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the A1 COM, in the world frame: a
+        yaw-frame policy (`frame == 'yaw'`) needs the heading `yaw` (rad; () or (B,)), which
+        turns it: [R_z(yaw) f, R_z(yaw) tau]."""
         if self.action_size != 6:
             raise ValueError(
                 f"u needs a 6-D action [f_a, tau_a], this policy has {self.action_size}."
             )
-        return self.action(obs) * self.scale
+        u = self.action(obs) * self.scale
+        if self.frame == "world":
+            return u
+        if yaw is None:
+            raise ValueError("This policy's u is in the yaw frame: pass the heading, u(obs, yaw).")
+        c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))
+        out = u.copy()
+        for i in (0, 3):  # force, then torque: R_z(yaw) v
+            out[..., i] = c * u[..., i] - s * u[..., i + 1]
+            out[..., i + 1] = s * u[..., i] + c * u[..., i + 1]
+        return out
 
 
 __all__ = ["FORMAT_VERSION", "NumpyPolicy", "read_tree"]

@@ -111,7 +111,7 @@ def _policy_file(d: Declared) -> _File:
         d.meta["policy"],
         "policy",
         "policy",
-        policy_template(d.observation_size, d.policy_hidden, d.action_size),
+        policy_template(d.observation_size, d.policy_hidden, d.action_size, d.policy_inputs),
         (
             f"policy.hidden lists {n} hidden layers, so {n + 1} layers hidden_* with the output",
             n + 1,

@@ -12,11 +12,14 @@ Keys (format_version 1; `export` writes them all):
                     lack it; they meant `observation_meta()`, which is then used
     adapter_config  `AdapterConfig`'s fields (latent_size, hidden, decoder_sees_body shape the
                     encoders and the decoder)
-    policy          {file, sha256, hidden, action_size, observation_size (s_body + latent_size),
-                    observation_layout (s_body's names, then z_0 ..), activation, input, output}
+    policy          {file, sha256, hidden, action_size, inputs (the observation's blocks,
+                    `sac.policy.POLICY_INPUTS`; absent: [s_body, z]), observation_size (their
+                    sizes), observation_layout (s_body's names, z_0 .., then u_obs's names),
+                    activation, input, output}
     decoder         {file, sha256, latent_size, out_size, sees_body, target_layout}
     encoders        {arm: {file, input_size, input_layout, arm_spec, sha256}}
-    action_scaling  {u_scale (action_size,): N for f_a, N·m for tau_a; u: in words}
+    action_scaling  {u_scale (action_size,): N for f_a, N·m for tau_a; frame: 'yaw' or 'world'
+                    (env_config.u_frame; absent: world); u: in words}
     env_config, sac_config, extra   as given to `export`, or null
 """
 
@@ -33,10 +36,11 @@ from typing import Any
 from dpc_mjx._version import __version__
 from dpc_mjx.adapter.networks import DRP_SIZE, AdapterConfig
 from dpc_mjx.envs.config import EnvConfig
-from dpc_mjx.envs.observations import S_BODY_NAMES, ObsLayout
+from dpc_mjx.envs.observations import S_BODY_NAMES, U_OBS_NAMES, ObsLayout
 from dpc_mjx.errors import DpcError
 from dpc_mjx.io.serialization import read_json
 from dpc_mjx.robots.spec_json import ArmLike, arm_to_json
+from dpc_mjx.sac.policy import PAPER_INPUTS, POLICY_INPUTS, observation_size
 
 FORMAT_VERSION = 1  # of the export folder; bump when its files or sidecar keys change meaning
 SIDECAR = "dpc.json"
@@ -64,9 +68,10 @@ class Declared:
     s_body: slice  # of every encoder's input
     policy_hidden: tuple[int, ...]
     action_size: int
-    observation_size: int  # the policy's input [s_body, z]
+    observation_size: int  # the policy's input, the blocks `policy_inputs`
     decoder_out: int  # next roll and pitch rate
     input_sizes: dict[str, int]  # arm -> its encoder's input size [s_body, s_arm, p_arm]
+    policy_inputs: tuple[str, ...]  # the blocks of the policy's observation, in order
 
 
 # --------------------------------------------------------------------------- building
@@ -77,9 +82,12 @@ def observation_meta() -> dict:
     s_body = ObsLayout(n_arm_joints=0, n_arm_act=0).s_body  # the same in every arm's layout
     return {
         "s_body": {"start": s_body.start, "stop": s_body.stop, "names": list(S_BODY_NAMES)},
+        "u_obs": {"names": list(U_OBS_NAMES), "frame": "yaw"},
         "encoder_input": "[s_body, s_arm (n joint positions, then n velocities), p_arm (n_act "
-        "servo targets)]: the raw observation of the arm's env, encoders.<arm>.input_size long",
-        "policy_input": "[s_body, z (adapter_config.latent_size)]: policy.observation_layout",
+        "servo targets)]: the first encoders.<arm>.input_size entries of the raw observation of "
+        "the arm's env; u_obs (the disturbance observer's estimate) follows them",
+        "policy_input": "policy.inputs of s_body, z (adapter_config.latent_size), u_obs: "
+        "policy.observation_layout",
     }
 
 
@@ -103,6 +111,7 @@ def build(
     adapter_config: AdapterConfig,
     policy_hidden: tuple[int, ...],
     action_size: int,
+    policy_inputs: tuple[str, ...],
     encoders: dict[str, dict],
     env_config: EnvConfig | None,
     sac_config: dict | None,
@@ -111,7 +120,6 @@ def build(
     """The sidecar of an export, its files' sha256s still None (`export` sets them)."""
     latent = adapter_config.latent_size
     observation = observation_meta()
-    s_body = observation["s_body"]
     scaling = env_config or EnvConfig()
     return {
         "format_version": FORMAT_VERSION,
@@ -125,8 +133,9 @@ def build(
             "sha256": None,  # set once the file is written
             "hidden": list(policy_hidden),
             "action_size": action_size,
-            "observation_size": s_body["stop"] - s_body["start"] + latent,
-            "observation_layout": [*s_body["names"], *(f"z_{i}" for i in range(latent))],
+            "inputs": list(policy_inputs),
+            "observation_size": observation_size(policy_inputs, latent),
+            "observation_layout": _policy_layout(policy_inputs, latent),
             "activation": "relu",
             "input": "(observation - obs_norm.mean) / obs_norm.std, obs_norm in policy.msgpack",
             "output": "action = tanh(first action_size outputs), in [-1, 1]",
@@ -142,13 +151,24 @@ def build(
         "encoders": encoders,
         "action_scaling": {
             "u_scale": list(scaling.u_scale),
-            "u": "[f_a (N), tau_a (N m)] = u_scale * a (per component), world frame, about the "
-            "A1 COM",
+            "frame": scaling.u_frame,
+            "u": f"[f_a (N), tau_a (N m)] = u_scale * a (per component), {scaling.u_frame} "
+            "frame, about the A1 COM",
         },
         "env_config": dataclasses.asdict(env_config) if env_config is not None else None,
         "sac_config": sac_config,
         "extra": extra,
     }
+
+
+def _policy_layout(inputs: tuple[str, ...], latent: int) -> list[str]:
+    """The names of the policy's observation entries."""
+    names = {
+        "s_body": list(S_BODY_NAMES),
+        "z": [f"z_{i}" for i in range(latent)],
+        "u_obs": list(U_OBS_NAMES),
+    }
+    return [n for block in inputs for n in names[block]]
 
 
 def now() -> str:
@@ -205,13 +225,21 @@ def check(meta: dict, path: pathlib.Path) -> Declared:
     hidden = _ints(p, "hidden", path, "policy")
     action_size = _int(p, "action_size", path, "policy")
     obs_size = _int(p, "observation_size", path, "policy")
-    if obs_size != n_body + latent:
+    policy_inputs = tuple(p.get("inputs", PAPER_INPUTS))  # older sidecars: [s_body, z]
+    if policy_inputs not in POLICY_INPUTS.values():
         raise DpcError(
-            f"{path}: policy.observation_size={obs_size} but s_body ({n_body}) + "
-            f"latent_size ({latent}) = {n_body + latent}; {REEXPORT}."
+            f"{path}: policy.inputs is {_json(p.get('inputs'))}; this dpc_mjx knows "
+            f"{[list(v) for v in POLICY_INPUTS.values()]}; {REEXPORT}."
         )
-    layout = [*names, *(f"z_{i}" for i in range(latent))]
-    z_names = f"observation.s_body.names + z_0..z_{latent - 1} (adapter_config.latent_size)"
+    expected = observation_size(policy_inputs, latent)  # s_body is this library's (_s_body)
+    if obs_size != expected:
+        raise DpcError(
+            f"{path}: policy.observation_size={obs_size} but policy.inputs "
+            f"{list(policy_inputs)} with s_body ({n_body}) and latent_size ({latent}) make "
+            f"{expected}; {REEXPORT}."
+        )
+    layout = _policy_layout(policy_inputs, latent)
+    z_names = f"the names of policy.inputs (z_0..z_{latent - 1}: adapter_config.latent_size)"
     _same(path, "policy.observation_layout", p.get("observation_layout"), layout, z_names)
 
     d = meta["decoder"]
@@ -246,7 +274,9 @@ def check(meta: dict, path: pathlib.Path) -> Declared:
                 f"the encoder trained for this arm or {REEXPORT}."
             )
     _check_scaling(meta, path, action_size)
-    return Declared(path, meta, config, s_body, hidden, action_size, obs_size, out_size, inputs)
+    return Declared(
+        path, meta, config, s_body, hidden, action_size, obs_size, out_size, inputs, policy_inputs
+    )
 
 
 def check_records(d: Declared) -> None:

@@ -1,10 +1,10 @@
 """The `dpc-mjx` command line: one entry point, a subcommand per stage.
 
-    dpc-mjx demo                       a small adapter + short SAC run, then MBC vs DPC (minutes)
-    dpc-mjx train --run runs/x         data -> adapter -> SAC -> export -> evaluation
+    dpc-mjx demo                       a small run, then MBC / observer / DPC (minutes)
+    dpc-mjx train --run runs/x         data -> adapter -> policy (-> SAC) -> export -> evaluation
     dpc-mjx train-adapter --run runs/x only the adapter stage (continue with train --resume)
     dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
-    dpc-mjx eval --export DIR          MBC / DPC / oracle (/ observer), protocol of docs/results.md
+    dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
     dpc-mjx variants                   every arm variant built and stood in MJX
@@ -30,7 +30,7 @@ def _parse_sets(items: list[str]) -> dict:
     for item in items:
         name, sep, text = item.partition("=")
         if not sep or not name:
-            raise DpcError(f"--set takes name=value, got {item!r} (e.g. sac.num_envs=32).")
+            raise DpcError(f"Options take name=value, got {item!r} (e.g. sac.num_envs=32).")
         try:
             value = json.loads(text)
         except json.JSONDecodeError:
@@ -90,6 +90,7 @@ def _eval(args: argparse.Namespace) -> None:
         seed=args.seed,
         out=args.out,
         csv=args.csv or _default_csv(args),
+        env=_parse_sets(args.env),
     )
 
 
@@ -145,11 +146,13 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
         p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
         if resume:
-            p.add_argument("--timesteps", type=int, help="SAC env steps (default 1000000)")
+            p.add_argument(
+                "--timesteps", type=int, help="SAC env steps after the regression (default 0: none)"
+            )
             p.add_argument("--episodes", type=int, help="evaluation episodes (default 64)")
             p.add_argument("--resume", action="store_true", help="continue a killed run")
 
-    p = sub.add_parser("demo", help="small adapter + short SAC, then MBC vs DPC (minutes)")
+    p = sub.add_parser("demo", help="a small run, then MBC / observer / DPC (minutes)")
     p.add_argument("--quick", action="store_true", help="an even smaller budget (smoke run)")
     p.set_defaults(handler=_demo)
 
@@ -177,14 +180,21 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--controllers",
         nargs="+",
-        default=["mbc", "dpc", "oracle"],
-        help="any of mbc observer dpc oracle (default: mbc dpc oracle)",
+        default=["mbc", "observer", "dpc", "oracle"],
+        help="any of mbc observer dpc oracle (default: all four)",
     )
     p.add_argument("--task", default="a1_arm/reaching")
     p.add_argument("--episodes", type=int, default=64)
     p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
     p.add_argument("--seed", type=int, default=1000)
     p.add_argument("--out", help="also write the table to this markdown file")
+    p.add_argument(
+        "--env",
+        nargs="*",
+        default=[],
+        metavar="NAME=VALUE",
+        help="env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact sensors)",
+    )
     p.add_argument(
         "--csv",
         help="one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)",

@@ -20,6 +20,7 @@ from dpc_mjx.io.serialization import jsonable, read_json, write_json
 
 CONFIG_FILE = "config.json"
 ACTOR_INITS = ("random", "oracle_regression")
+POLICY_INPUTS = tuple(sac.POLICY_INPUTS)  # 'paper': [s_body, z]; 'observer': [s_body, z, u_obs]
 
 
 # The SAC settings of the shipped run (docs/results.md, "DPC on the reaching task"): a longer run
@@ -51,18 +52,37 @@ class RunConfig:
     samples: int = 100_000  # random-motion transitions for the adapter
     data_envs: int = 64
     adapter: adapter_lib.AdapterConfig = adapter_lib.AdapterConfig()
-    sac: sac.SacConfig = TRAINED_SAC
+    # No SAC stage by default (num_timesteps=0: the policy is the oracle regression, actor_init):
+    # in the SAC runs v4 and v5 the selected actor was the regressed one (docs/results.md);
+    # `--set sac.num_timesteps=1000000` runs SAC with those runs' settings (TRAINED_SAC)
+    sac: sac.SacConfig = dataclasses.replace(TRAINED_SAC, num_timesteps=0)
     eval_episodes: int = 64
     eval_steps: int = 1000  # env steps of 20 ms
-    eval_controllers: tuple[str, ...] = ("mbc", "dpc", "oracle")
+    eval_controllers: tuple[str, ...] = ("mbc", "observer", "dpc", "oracle")
     # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
     # the oracle's u over the adapter's samples, `sac.warm_start`; then SAC as usual)
     actor_init: str = "oracle_regression"
+    # What the policy observes (`sac.policy.POLICY_INPUTS`): "paper" [s_body, z], or "observer"
+    # [s_body, z, u_obs], the disturbance observer's estimate too (better with exact sensors,
+    # worse with the robot's: docs/results.md, the ablation)
+    policy_input: str = "paper"
+    # DAgger after the regression: rounds of `dagger_samples` states visited by the current
+    # actor, labelled with the oracle's u, added to the data before regressing again
+    dagger_rounds: int = 0
+    dagger_samples: int = 20_000
     seed: int = 0
 
     def validate(self) -> None:
         get_config(self.task, **self.env_overrides)  # task name and overrides
-        for name in ("samples", "data_envs", "eval_episodes", "eval_steps"):
+        if not isinstance(self.dagger_rounds, int) or self.dagger_rounds < 0:
+            raise DpcError(
+                f"RunConfig.dagger_rounds must be an int >= 0, got {self.dagger_rounds!r}."
+            )
+        if self.dagger_rounds and self.actor_init != "oracle_regression":
+            raise DpcError(
+                "dagger_rounds needs actor_init='oracle_regression' (the oracle labels)."
+            )
+        for name in ("samples", "data_envs", "eval_episodes", "eval_steps", "dagger_samples"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
                 raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
@@ -70,6 +90,12 @@ class RunConfig:
         self.sac.validate()
         if self.actor_init not in ACTOR_INITS:
             raise DpcError(f"actor_init={self.actor_init!r} is not one of {list(ACTOR_INITS)}.")
+        sac.inputs_named(self.policy_input)
+        if self.actor_init == "random" and self.sac.num_timesteps == 0:
+            raise DpcError(
+                "actor_init='random' with sac.num_timesteps=0 trains nothing: set "
+                "sac.num_timesteps (e.g. 1000000) or actor_init='oracle_regression'."
+            )
 
     def to_json(self) -> dict:
         return jsonable(dataclasses.asdict(self))

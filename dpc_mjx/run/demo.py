@@ -80,37 +80,28 @@ def run_variants(variants=tuple(VARIANTS), batch: int = 16, seconds: float = 1.0
     return rows
 
 
-# The shipped run's recipe (`RunConfig`'s defaults: the actor regressed on the oracle's u, then
-# SAC) on a budget that runs in minutes on a 2-core CPU: every stage does real work (the adapter
-# beats a constant predictor, the critics learn for 4096 gradient steps before the actor moves),
-# but 1/20 of the shipped run's SAC steps and a quarter of its evaluation (docs/results.md).
-# `quick` is a smoke run of the same stages.
+# The shipped run's recipe (`RunConfig`'s defaults: random-motion data, the adapter, the actor
+# regressed on the oracle's u on [s_body, z, u_obs], no SAC stage) on a budget that runs in a few
+# minutes on a 2-core CPU: a fifth of the shipped run's samples and a sixteenth of its
+# evaluation (docs/results.md). `quick` is a smoke run of the same stages.
 DEMO = {
     "samples": 20_000,
     "adapter.epochs": 20,
-    "sac.num_timesteps": 49_152,
-    "sac.num_envs": 32,
-    "sac.min_replay_size": 4096,
-    "sac.epoch_steps": 8192,
-    "sac.actor_warmup_steps": 4096,
-    "sac.eval_envs": 16,
     "eval_episodes": 16,
     "eval_steps": 500,
-    "eval_controllers": ("mbc", "dpc"),
+    "eval_controllers": ("mbc", "observer", "dpc"),
 }
 QUICK = DEMO | {
     "samples": 4096,
     "adapter.epochs": 5,
-    "sac.num_timesteps": 8192,
-    "sac.epoch_steps": 4096,
     "eval_episodes": 8,
     "eval_steps": 100,
 }
 
 
 def run_demo(quick: bool = False, run_dir: str | None = None) -> dict:
-    """Data, adapter, SAC, export and evaluation of the regular arm on the reaching task with a
-    small budget; prints the stages, the evaluation table and one MBC-vs-DPC line."""
+    """Data, adapter, policy, export and evaluation of the regular arm on the reaching task with
+    a small budget; prints the stages, the evaluation table and one MBC / observer / DPC line."""
     import datetime
     import pathlib
 
@@ -124,13 +115,14 @@ def run_demo(quick: bool = False, run_dir: str | None = None) -> dict:
     t0 = time.perf_counter()
     summary = train_and_evaluate(config, run)
     cells = {c["controller"]: c for c in summary["eval"]}
-    mbc, dpc = cells["mbc"], cells["dpc"]
+    mbc, observer, dpc = cells["mbc"], cells["observer"], cells["dpc"]
+    n = mbc["episodes"]
     print(
-        f"\nMBC vs DPC ({config.arm}, {mbc['episodes']} episodes of {mbc['steps'] * 0.02:g} s): "
-        f"fall rate {mbc['falls'] / mbc['episodes']:.2f} vs {dpc['falls'] / dpc['episodes']:.2f}, "
-        f"mean return {mbc['mean_return']:.1f} vs {dpc['mean_return']:.1f} "
-        f"after {summary['sac_env_steps']:,} SAC env steps "
-        f"(demo budget; the trained run is in docs/results.md). "
+        f"\nMBC / observer / DPC ({config.arm}, {n} episodes of {mbc['steps'] * 0.02:g} s): "
+        f"fall rate {mbc['falls'] / n:.2f} / {observer['falls'] / n:.2f} / "
+        f"{dpc['falls'] / n:.2f}, mean return {mbc['mean_return']:.1f} / "
+        f"{observer['mean_return']:.1f} / {dpc['mean_return']:.1f} "
+        f"(demo budget; the shipped run is in docs/results.md). "
         f"Wall time {time.perf_counter() - t0:.0f} s.",
         flush=True,
     )

@@ -27,7 +27,7 @@ import numpy as np
 from dpc_mjx.envs.registry import make
 from dpc_mjx.envs.rollout import Policy, run_episodes
 from dpc_mjx.errors import DpcError
-from dpc_mjx.run.stats import mean_ci, wilson_ci
+from dpc_mjx.run.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 
 CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
 
@@ -210,3 +210,41 @@ def write_episodes_csv(path: str | pathlib.Path, cells: list[CellResult]) -> pat
         for c in cells:
             w.writerows(episode_rows(c))
     return path
+
+
+PAIRED_HEADER = (
+    "| comparison (same episodes) | return difference [95% CI] | only the first fell | only the "
+    "second fell | McNemar p |\n|---|---|---|---|---|"
+)
+
+
+def paired_rows(cells: list[CellResult]) -> list[str]:
+    """Markdown rows under `PAIRED_HEADER`: per arm, DPC (or else the observer) against each
+    other controller evaluated on the same episodes, and the share of the MBC-to-oracle gap in
+    falls it closes ((MBC falls - its falls) / (MBC falls - oracle falls))."""
+    rows = []
+    for arm in dict.fromkeys(c.arm for c in cells):
+        mine = {c.controller: c for c in cells if c.arm == arm}
+        first = next((k for k in ("dpc", "observer") if k in mine), None)
+        if first is None:
+            continue
+        a = mine[first]
+        for name, b in mine.items():
+            if name == first:
+                continue
+            diff, lo, hi = paired_diff_ci(a.per_episode["return"], b.per_episode["return"])
+            only_a, only_b = mcnemar_counts(a.per_episode["fell"], b.per_episode["fell"])
+            rows.append(
+                f"| {arm}: {first} - {name} | {diff:+.1f} [{lo:+.1f}, {hi:+.1f}] | {only_a} | "
+                f"{only_b} | {mcnemar_p(only_a, only_b):.2g} |"
+            )
+        if "mbc" in mine and "oracle" in mine and mine["mbc"].falls > mine["oracle"].falls:
+            gap = mine["mbc"].falls - mine["oracle"].falls
+            for name in ("dpc", "observer"):
+                if name in mine:
+                    share = (mine["mbc"].falls - mine[name].falls) / gap
+                    rows.append(
+                        f"| {arm}: {name} closes {share:.0%} of the MBC-to-oracle gap "
+                        "in falls | | | | |"
+                    )
+    return rows

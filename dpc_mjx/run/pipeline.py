@@ -1,16 +1,18 @@
-"""A whole DPC run as one function: data -> adapter -> SAC -> export -> evaluation.
+"""A whole DPC run as one function: data -> adapter -> policy (oracle regression, then SAC if
+asked) -> export -> evaluation.
 
-    config = RunConfig(arm="regular", samples=100_000, sac=SacConfig(num_timesteps=500_000))
+    config = RunConfig(arm="regular")        # the shipped recipe (docs/results.md)
     summary = train_and_evaluate(config, "runs/regular")
+    config.replace(**{"sac.num_timesteps": 500_000})   # with a SAC stage after the regression
 
 The run folder (every file written atomically; `resume=True` continues a killed run):
 
     config.json          the RunConfig
     adapter/             the trained adapter (`adapter.checkpoint`): adapter.json, *.msgpack
-    sac/                 sac_log.csv (one row per epoch) and the SAC checkpoint
+    sac/                 warm_start.json (the regression), sac_log.csv and the SAC checkpoint
     export/              the deployable artefacts (`dpc_mjx.io.export`; `dpc-mjx eval --run`)
     plots/               adapter_loss.png, posture_prediction.png, training_curve.png
-    eval.md              MBC vs DPC vs oracle table (`dpc_mjx.run.eval` protocol)
+    eval.md              MBC / observer / DPC / oracle table (`dpc_mjx.run.eval` protocol)
     summary.json         wall time of every stage, sample counts, the evaluation
 """
 
@@ -29,7 +31,16 @@ from dpc_mjx.envs.registry import get_config, make
 from dpc_mjx.io.serialization import write_json
 from dpc_mjx.run import plots
 from dpc_mjx.run.config import RunConfig, read_run_config, start_run, tuples
-from dpc_mjx.run.eval import TABLE_HEADER, CellResult, evaluate, table_row, write_episodes_csv
+from dpc_mjx.run.eval import (
+    CONTROLLERS,
+    PAIRED_HEADER,
+    TABLE_HEADER,
+    CellResult,
+    evaluate,
+    paired_rows,
+    table_row,
+    write_episodes_csv,
+)
 from dpc_mjx.sac import warm_start
 
 SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the trained run's export
@@ -126,19 +137,24 @@ def train_policy(
     resume: bool = False,
     progress: bool = True,
 ) -> sac.TrainResult:
-    """SAC on the latent-observation env of the run's arm."""
+    """The policy: the oracle regression (`actor_init`), then SAC on the policy-observation env
+    of the run's arm (none when `sac.num_timesteps` is 0, the default)."""
     latent_env, sac_config = _sac_setup(config, adapter)
     folder = run_dir / "sac"
     has_checkpoint = (folder / "checkpoint.json").exists()
-    print(
-        f"sac: {'resuming' if resume and has_checkpoint else 'training'} to "
-        f"{sac_config.num_timesteps:,} env steps ({sac_config.num_envs} envs)",
-        flush=True,
-    )
+    if sac_config.num_timesteps == 0:
+        print(
+            "sac: no SAC stage (sac.num_timesteps=0): the policy is the starting actor", flush=True
+        )
+    else:
+        print(
+            f"sac: {'resuming' if resume and has_checkpoint else 'training'} to "
+            f"{sac_config.num_timesteps:,} env steps ({sac_config.num_envs} envs)",
+            flush=True,
+        )
     actor_init = None
     if config.actor_init == "oracle_regression":
-        u_scale = latent_env.unwrapped.config.u_scale
-        actor_init = _oracle_regression(config, run_dir, adapter, u_scale)
+        actor_init = _oracle_regression(config, run_dir, adapter, latent_env.unwrapped.config)
     result = sac.train(
         latent_env,
         sac_config,
@@ -153,27 +169,63 @@ def train_policy(
 
 
 def _sac_setup(config: RunConfig, adapter: adapter_lib.Adapter):
-    """The run's latent-observation env (its arm, u from the policy) and its SAC config."""
+    """The run's policy-observation env (its arm, u from the policy) and its SAC config."""
     env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
-    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder)
+    inputs = sac.inputs_named(config.policy_input)
+    latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder, inputs)
     return latent_env, dataclasses.replace(config.sac, seed=config.seed)
 
 
-def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, u_scale):
-    """The `actor_init` of `sac.train` that regresses the actor on the oracle's u."""
+def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_config):
+    """The `actor_init` of `sac.train` that regresses the actor on the oracle's u (in the
+    env's `u_frame`, scaled by its `u_scale`) over the adapter's MBC samples, then
+    `config.dagger_rounds` times over those plus the student's own states (DAgger: the current
+    actor drives a 'policy' env, the oracle's u labels each state it visits)."""
 
     def init(trainer, carry):
         data = adapter_lib.Dataset.load(run_dir / "adapter" / DATA_FILE)
-        carry, report = warm_start.regress_actor(
-            trainer, carry, adapter.config, adapter.encoder, data, u_scale, seed=config.seed
-        )
-        write_json(run_dir / "sac" / "warm_start.json", report)
-        r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
-        print(
-            f"sac: actor regressed on the oracle's u ({report['samples']:,} samples; "
-            f"held-out R^2 per u component {r2})",
-            flush=True,
-        )
+        reports = []
+        for round_ in range(config.dagger_rounds + 1):
+            if round_:
+                student = sac.dpc_policy(
+                    adapter.config,
+                    adapter.encoder,
+                    sac.policy_state(
+                        trainer, carry.training.policy_params, carry.training.normalizer
+                    ),
+                )
+                env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
+                print(
+                    f"dagger {round_}/{config.dagger_rounds}: {config.dagger_samples:,} states of "
+                    "the student, labelled with the oracle's u",
+                    flush=True,
+                )
+                own = adapter_lib.collect(
+                    env,
+                    config.dagger_samples,
+                    n_envs=config.data_envs,
+                    seed=config.seed + round_,
+                    policy=student,
+                )
+                data = adapter_lib.Dataset.concatenate([data, own])
+            carry, report = warm_start.regress_actor(
+                trainer,
+                carry,
+                adapter.config,
+                adapter.encoder,
+                data,
+                env_config.u_scale,
+                u_frame=env_config.u_frame,
+                seed=config.seed,
+            )
+            reports.append(report)
+            r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
+            print(
+                f"sac: actor regressed on the oracle's u ({report['samples']:,} samples; "
+                f"held-out R^2 per u component {r2})",
+                flush=True,
+            )
+        write_json(run_dir / "sac" / "warm_start.json", reports[-1] | {"rounds": reports})
         return carry
 
     return init
@@ -202,6 +254,7 @@ def export(
             "sac_selected_epoch": result.selected_epoch,
             "sac_env_steps": result.history[-1]["env_steps"] if result.history else 0,
             "actor_init": config.actor_init,
+            "policy_input": config.policy_input,
         },
     )
 
@@ -231,8 +284,13 @@ def _evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[
         print(table_row(cell), flush=True)
 
     cells = evaluate(arms, controllers, on_result=show, **kwargs)
+    paired = paired_rows(cells)
+    if paired:
+        print("\n" + "\n".join([PAIRED_HEADER, *paired]), flush=True)
     if out is not None:
-        pathlib.Path(out).write_text("\n".join([TABLE_HEADER, *map(table_row, cells)]) + "\n")
+        lines = [TABLE_HEADER, *map(table_row, cells)]
+        lines += ["", PAIRED_HEADER, *paired] if paired else []
+        pathlib.Path(out).write_text("\n".join(lines) + "\n")
     if csv is not None:
         print(f"per-episode rows: {write_episodes_csv(csv, cells)}", flush=True)
     return cells
@@ -250,8 +308,11 @@ def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = Non
 
 def env_overrides(artefacts: io.Artefacts) -> dict:
     """The env options an export was trained with (its sidecar's env_config), to evaluate and
-    transfer under the same disturbances; the controller is chosen per use."""
-    saved = artefacts.meta.get("env_config") or {}
+    transfer under the same disturbances; the controller is chosen per use. An export written
+    before `EnvConfig.u_frame` and the sensor model existed acted in the world frame and was
+    trained with exact sensors."""
+    before = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
+    saved = {**before, **(artefacts.meta.get("env_config") or {})}
     return tuples({k: v for k, v in saved.items() if k != "controller"})
 
 
@@ -289,25 +350,30 @@ def evaluate_export(
     export_dir: str | pathlib.Path,
     *,
     arms: list[str] | None = None,
-    controllers: list[str] = ("mbc", "dpc", "oracle"),
+    controllers: list[str] = CONTROLLERS,
     task: str = "a1_arm/reaching",
     episodes: int = 64,
     steps: int = 1000,
     seed: int = 1000,
     out: str | pathlib.Path | None = None,
     csv: str | pathlib.Path | None = None,
+    env: dict | None = None,
 ) -> list[CellResult]:
     """The evaluation protocol for the arms of an export (default: every arm with an encoder),
-    under the env options it was trained with; prints the table (and writes it to `out`, and
-    one row per episode to `csv`)."""
+    under the env options it was trained with and `env` over them (e.g. exact sensors); prints
+    the table (and writes it to `out`, and one row per episode to `csv`)."""
     artefacts = io.load(export_dir)
     arms = list(arms or sorted(artefacts.encoders))
     if "dpc" in controllers:
         for arm in arms:
             artefacts.encoder(arm)  # a missing encoder fails before any compile
     trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
-    # the training task's disturbances; another task brings its own
-    overrides = env_overrides(artefacts) if task == trained_on else {}
+    # the training task's disturbances; another task brings its own (the policy's frame and
+    # sensors stay)
+    saved = env_overrides(artefacts)
+    kept = ("u_frame", "sensor_noise", "sensor_delay")
+    overrides = saved if task == trained_on else {k: saved[k] for k in kept}
+    overrides = {**overrides, **(env or {})}
     return _evaluate_table(
         arms,
         list(controllers),

@@ -41,3 +41,13 @@ def mcnemar_counts(fell_a: np.ndarray, fell_b: np.ndarray) -> tuple[int, int]:
     An exact McNemar test compares them against Binomial(n, 1/2), n their sum."""
     fell_a, fell_b = np.asarray(fell_a, bool), np.asarray(fell_b, bool)
     return int(np.sum(fell_a & ~fell_b)), int(np.sum(fell_b & ~fell_a))
+
+
+def mcnemar_p(only_a: int, only_b: int) -> float:
+    """Exact two-sided McNemar p-value of the discordant counts (`mcnemar_counts`):
+    P(a count as far from n/2 as this | Binomial(n, 1/2)), n = only_a + only_b."""
+    n = only_a + only_b
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, k) for k in range(min(only_a, only_b) + 1)) / 2.0**n
+    return min(1.0, 2.0 * tail)

@@ -1,6 +1,7 @@
-"""The high-level estimator (paper §III-C): SAC on `[s_body, z]`, acting through u = [f_a, tau_a].
+"""The high-level estimator (paper §III-C): SAC on `[s_body, z]` (or `[s_body, z, u_obs]`),
+acting through u = [f_a, tau_a].
 
-    env.py         `LatentObsWrapper`: a DPC env as the policy sees it, `[s_body, z]`
+    env.py         `LatentObsWrapper`: a DPC env as the policy sees it (`POLICY_INPUTS`)
     networks.py    brax's SAC actor and twin critics at the paper's sizes
     config.py      `SacConfig`: the hyperparameters (brax's SAC's, and those of our loop)
     trainer.py     `make_trainer`: the jitted pieces, brax's SAC in our epoch, the evaluation
@@ -8,7 +9,7 @@
     log.py         the CSV log, one row per epoch
     checkpoint.py  the full training state on disk, for resuming
     warm_start.py  beyond the paper: the actor regressed on the oracle's u before SAC
-    policy.py      `PolicyState`, `act`, `dpc_policy`: a trained policy as data, deployed
+    policy.py      `PolicyState`, `POLICY_INPUTS`, `act`, `dpc_policy`: a trained policy as data
 
 env = LatentObsWrapper(make("a1_arm/reaching", arm="regular"), adapter.config, adapter.encoder)
 result = train(env, SacConfig(num_timesteps=500_000), run_dir="runs/dpc")
@@ -18,18 +19,20 @@ policy = dpc_policy(adapter.config, adapter.encoder, result.policy)   # raw obs 
 from dpc_mjx.sac.config import SacConfig
 from dpc_mjx.sac.env import LatentObsWrapper
 from dpc_mjx.sac.networks import HIDDEN, make_networks
-from dpc_mjx.sac.policy import PolicyState, act, dpc_policy
+from dpc_mjx.sac.policy import POLICY_INPUTS, PolicyState, act, dpc_policy, inputs_named
 from dpc_mjx.sac.train import TrainResult, policy_state, restore_policy, train
 from dpc_mjx.sac.trainer import make_trainer
 
 __all__ = [
     "HIDDEN",
     "LatentObsWrapper",
+    "POLICY_INPUTS",
     "PolicyState",
     "SacConfig",
     "TrainResult",
     "act",
     "dpc_policy",
+    "inputs_named",
     "make_networks",
     "make_trainer",
     "policy_state",

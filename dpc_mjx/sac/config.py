@@ -22,7 +22,9 @@ from dpc_mjx.sac.networks import HIDDEN
 class SacConfig:
     """SAC hyperparameters (the env's own options live in its `EnvConfig`)."""
 
-    num_timesteps: int = 500_000  # env steps in all (rounded up to whole epochs)
+    # env steps in all (rounded up to whole epochs); 0: no SAC, the result is the starting actor
+    # (`train`'s actor_init, e.g. the oracle regression)
+    num_timesteps: int = 500_000
     num_envs: int = 64  # envs stepped together; one actor step = num_envs env steps
     batch_size: int = 256  # transitions per gradient step
     grad_updates_per_step: int = 16  # gradient steps per actor step (update-to-data 1/4)
@@ -51,13 +53,12 @@ class SacConfig:
     seed: int = 0
 
     def validate(self) -> None:
-        for name in ("eval_every", "actor_warmup_steps"):
+        for name in ("eval_every", "actor_warmup_steps", "num_timesteps"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 0:
                 raise DpcError(f"SacConfig.{name} must be an int >= 0, got {v!r}.")
         for name in (
             "eval_envs",
-            "num_timesteps",
             "num_envs",
             "batch_size",
             "grad_updates_per_step",
@@ -67,7 +68,7 @@ class SacConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise DpcError(f"SacConfig.{name} must be an int >= 1, got {v!r}.")
-        if self.min_replay_size < 0 or self.min_replay_size >= self.num_timesteps:
+        if self.num_timesteps and not 0 <= self.min_replay_size < self.num_timesteps:
             raise DpcError(
                 f"SacConfig.min_replay_size={self.min_replay_size} must be >= 0 and below "
                 f"num_timesteps={self.num_timesteps}, or no learning happens."
@@ -96,8 +97,8 @@ class SacConfig:
 
     @property
     def epochs(self) -> int:
-        """Epochs to reach `num_timesteps` env steps."""
-        return max(1, math.ceil(self.num_timesteps / self.env_steps_per_epoch))
+        """Epochs to reach `num_timesteps` env steps (0 for none)."""
+        return math.ceil(self.num_timesteps / self.env_steps_per_epoch)
 
 
 __all__ = ["SacConfig"]

@@ -98,7 +98,7 @@ def train(
             if run_dir is not None:
                 log.append(run_dir, row)
     t0 = time.perf_counter()
-    with bar(total * config.env_steps_per_epoch, "sac", "step", progress) as pb:
+    with bar(total * config.env_steps_per_epoch, "sac", "step", progress and total > 0) as pb:
         pb.update(start_epoch * config.env_steps_per_epoch)
         for epoch in range(start_epoch + 1, total + 1):
             t_epoch, grads_before = time.perf_counter(), int(carry.training.grad_steps)
@@ -152,6 +152,7 @@ def policy_state(trainer: Trainer, policy_params: dict, normalizer) -> PolicySta
         obs_norm=norm,
         hidden=tuple(trainer.config.hidden),
         action_size=trainer.action_size,
+        inputs=trainer.policy_inputs,
     )
 
 

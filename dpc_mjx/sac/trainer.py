@@ -34,6 +34,7 @@ from dpc_mjx.envs import rollout
 from dpc_mjx.envs.wrappers import wrap_for_training
 from dpc_mjx.sac.config import SacConfig
 from dpc_mjx.sac.networks import make_networks
+from dpc_mjx.sac.policy import PAPER_INPUTS
 
 
 @struct.dataclass
@@ -83,6 +84,7 @@ class Trainer:
     config: SacConfig
     observation_size: int
     action_size: int
+    policy_inputs: tuple[str, ...]  # the blocks of the observation (`sac.policy.POLICY_INPUTS`)
     networks: sac_networks.SACNetworks
     policy_optimizer: optax.GradientTransformation
     init: Callable  # key -> Carry
@@ -287,6 +289,7 @@ def make_trainer(env, config: SacConfig) -> Trainer:
     return Trainer(
         config=config,
         observation_size=obs_size,
+        policy_inputs=tuple(getattr(env, "policy_inputs", PAPER_INPUTS)),
         action_size=action_size,
         networks=nets,
         policy_optimizer=policy_opt,

@@ -3,13 +3,14 @@
 The paper trains SAC from scratch. On our reaching task SAC from scratch did not beat MBC within
 1e6 env steps on a CPU (docs/results.md), while a policy regressed on the oracle's u did. So the
 actor may start from that regression, a teacher-student warm start: the teacher is the oracle
-(the measured mount wrench, privileged), the student sees only what DPC sees, `[s_body, z]`; SAC
-then trains it on the paper's reward as usual (`SacConfig.actor_warmup_steps` lets the critics
-learn its value first).
+(the measured mount wrench, privileged), the student sees only what DPC sees (its observation,
+`sac.policy.POLICY_INPUTS`); SAC then trains it on the paper's reward as usual
+(`SacConfig.actor_warmup_steps` lets the critics learn its value first).
 
     carry, report = regress_actor(trainer, carry, adapter, data, u_scale)
 
-Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) (MSE), and its
+Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) (MSE; u_oracle in
+the policy's frame, `EnvConfig.u_frame`: turned into the yaw frame by the row's heading), and its
 exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
 samples (`Dataset.u_oracle`, collected with MBC); the observation statistics start from the same
 samples. The last `val_fraction` of the samples are held out (`Dataset.split`): the epoch with
@@ -27,8 +28,9 @@ from brax.training.acme import running_statistics
 
 from dpc_mjx import fitting
 from dpc_mjx.adapter.data import Dataset
-from dpc_mjx.adapter.networks import AdapterConfig, EncoderState, encode
+from dpc_mjx.adapter.networks import AdapterConfig, EncoderState
 from dpc_mjx.errors import DpcError
+from dpc_mjx.sac.policy import observation_size, policy_observation
 from dpc_mjx.sac.trainer import Carry, Trainer
 
 U_CLIP = 0.95  # targets stay inside tanh's range
@@ -42,6 +44,7 @@ def regress_actor(
     data: Dataset,
     u_scale,
     *,
+    u_frame: str = "yaw",
     epochs: int = 30,
     patience: int = 5,
     batch_size: int = 256,
@@ -50,22 +53,26 @@ def regress_actor(
     val_fraction: float = 0.1,
     seed: int = 0,
 ) -> tuple[Carry, dict]:
-    """`carry` with its actor and observation statistics fitted to the oracle's u on `data`, and
-    a report {'r2': per u component on held-out samples, 'val_mse', 'samples'}."""
-    if data.u_oracle is None:
-        raise DpcError("The dataset has no u_oracle column; collect it with adapter.collect.")
-    if data.s_body.shape[1] + adapter_config.latent_size != trainer.observation_size:
+    """`carry` with its actor and observation statistics fitted to the oracle's u on `data`
+    (in `u_frame`, the env's `EnvConfig.u_frame`), and a report {'r2': per u component on
+    held-out samples, 'val_mse', 'samples'}."""
+    if trainer.observation_size != observation_size(
+        trainer.policy_inputs, adapter_config.latent_size
+    ):
         raise DpcError(
-            f"The policy observes {trainer.observation_size} values, [s_body, z] has "
-            f"{data.s_body.shape[1] + adapter_config.latent_size}."
+            f"The policy observes {trainer.observation_size} values, {trainer.policy_inputs} "
+            f"with latent_size {adapter_config.latent_size} make "
+            f"{observation_size(trainer.policy_inputs, adapter_config.latent_size)}."
         )
     u_scale = np.asarray(u_scale, np.float32)
 
     def arrays(part: Dataset) -> tuple[jax.Array, jax.Array]:
-        """(obs (N, 11 + latent) the policy's [s_body, z], target (N, 6) in action units)."""
-        z = encode(adapter_config, encoder, part.encoder_input)
-        obs = jp.concatenate([jp.asarray(part.s_body), z], -1)
-        return obs, jp.asarray(np.clip(part.u_oracle / u_scale, -U_CLIP, U_CLIP))
+        """(obs (N, observation_size) the policy's, target (N, 6) in action units)."""
+        obs = policy_observation(
+            adapter_config, encoder, jp.asarray(part.observation), trainer.policy_inputs
+        )
+        target = np.clip(part.u_oracle_in(u_frame) / u_scale, -U_CLIP, U_CLIP)
+        return obs, jp.asarray(target)
 
     train, val = (arrays(part) for part in data.split(val_fraction))
     normalizer = running_statistics.update(carry.training.normalizer, train[0])

@@ -1,0 +1,167 @@
+"""How good is each estimate of u: R^2 and RMSE per component against the oracle, and the paper's
+figure "output parameters under a sudden force".
+
+    python experiments/u_estimation.py [--export DIR] [--other DIR] [--episodes 32] [--seed 5000]
+
+Held-out rollouts: `--episodes` episodes of the reaching task (regular arm, the export's env
+options, sensors as configured there) under the export's own DPC, from seeds `--seed`.. that
+chose nothing. On every step before an episode's end, each estimator's u is compared with the
+oracle's (the measured mount wrench, privileged) in the yaw frame (heading-aligned: x forward,
+y left, z up; torques about the A1 COM):
+
+    observer   the disturbance observer's estimate u_obs (what the `observer` controller uses)
+    dpc        the export's policy, u = u_scale * pi(obs) (the default recipe)
+    other      `--other`'s policy on the same observations (e.g. another recipe's export)
+    other, own loop   `--other`'s policy on rollouts under its own control (same seeds)
+
+A learned estimate is only as good as the states it is asked on: the first three rows share the
+export's states (the figure needs one episode), the last shows `--other` where it acts.
+
+The figure (`--figure`) shows f_z, tau_x and tau_y around the first push onset (an end-effector
+force that starts after at least 1 s of quiet) of an episode that does not fall.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+
+import jax
+import numpy as np
+
+from dpc_mjx import io
+from dpc_mjx.envs import rollout
+from dpc_mjx.envs.observations import PRIVILEGED
+from dpc_mjx.envs.registry import make
+from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
+from dpc_mjx.run.pipeline import SHIPPED, env_overrides
+
+COMPONENTS = ("f_x", "f_y", "f_z", "tau_x", "tau_y", "tau_z")
+PUSH_ONSET = 5.0  # N: an end-effector force above this starts a push
+
+
+def rollouts(export: pathlib.Path, episodes: int, steps: int, seed: int) -> dict:
+    """Per-step records (steps, episodes, ...) of the export's DPC on the reaching task."""
+    artefacts = io.load(export)
+    env = make("a1_arm/reaching", arm="regular", controller="policy", **env_overrides(artefacts))
+    policy = artefacts.dpc_policy("regular")
+
+    def record(before, after):
+        yaw = jax.vmap(lambda q: roll_pitch_yaw(q)[2])(before.pipeline_state.qpos[:, 3:7])
+        privileged = before.info["privileged"]
+        return {
+            "obs": before.obs,
+            "yaw": yaw,
+            "u_oracle": privileged[:, PRIVILEGED["u_oracle"]],
+            "push": privileged[:, PRIVILEGED["ee_force"]],
+            "done": after.done,
+        }
+
+    carry, key = rollout.start(env, episodes, seed)
+    run_chunk = rollout.make_chunk(jax.vmap(env.step), policy, 50, record)
+    parts = []
+    for _, (carry, records) in zip(range(steps // 50), rollout.chunks(run_chunk, carry, key)):
+        parts.append(records)
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    done_before = np.cumsum(out["done"], axis=0) - out["done"]  # dones before this step
+    out["alive"] = done_before == 0
+    out["u_scale"] = np.asarray(env.config.u_scale)
+    return out
+
+
+def estimates(rec: dict, export: pathlib.Path) -> np.ndarray:
+    """(steps, episodes, 6) the export's u on the recorded observations, yaw frame."""
+    artefacts = io.load(export)
+    policy = artefacts.dpc_policy("regular")
+    frame = env_overrides(artefacts)["u_frame"]
+    u = np.asarray(jax.jit(policy)(rec["obs"], None)) * np.asarray(
+        make("a1_arm/reaching", arm="regular", **env_overrides(artefacts)).config.u_scale
+    )
+    return u if frame == "yaw" else np.asarray(wrench_to_yaw_frame(u, rec["yaw"]))
+
+
+def scores(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R^2, RMSE) per component over the rows of (N, 6) arrays."""
+    resid = ((pred - truth) ** 2).sum(0)
+    spread = ((truth - truth.mean(0)) ** 2).sum(0)
+    return 1.0 - resid / spread, np.sqrt(resid / len(truth))
+
+
+def figure(rec: dict, series: dict[str, np.ndarray], truth: np.ndarray, path: pathlib.Path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    force = np.linalg.norm(rec["push"], axis=-1)  # (T, B) N
+    quiet = round(1.0 / 0.02)
+    chosen = None
+    for b in np.flatnonzero(rec["alive"][-1]):  # episodes that never fell
+        on = np.flatnonzero((force[1:, b] > PUSH_ONSET) & (force[:-1, b] <= PUSH_ONSET)) + 1
+        on = [t for t in on if t >= quiet and force[t - quiet : t, b].max() <= PUSH_ONSET]
+        if on and on[0] + 100 < len(force):
+            chosen = (b, on[0])
+            break
+    if chosen is None:
+        print("figure: no push onset found in an episode that did not fall")
+        return
+    b, t0 = chosen
+    window = np.arange(t0 - 25, t0 + 100)
+    t = (window - t0) * 0.02
+    fig, axes = plt.subplots(4, 1, figsize=(8, 9), sharex=True)
+    axes[0].plot(t, force[window, b], "k")
+    axes[0].set_ylabel("push |F| (N)")
+    styles = {"oracle": "k", "observer": "tab:orange", "dpc": "tab:blue", "other": "tab:green"}
+    for ax, i, unit in zip(axes[1:], (2, 3, 4), ("N", "N·m", "N·m"), strict=True):
+        ax.plot(t, truth[window, b, i], styles["oracle"], label="oracle (measured)")
+        for name, u in series.items():
+            ax.plot(t, u[window, b, i], color=styles[name], label=name)
+        ax.set_ylabel(f"{COMPONENTS[i]} ({unit})")
+    axes[1].legend(loc="best", fontsize=8)
+    axes[-1].set_xlabel("time from push onset (s)")
+    fig.suptitle(f"u under a sudden force (episode {b}, yaw frame)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    print(f"figure: {path}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--export", default=str(SHIPPED))
+    ap.add_argument("--other", help="a second export, evaluated on the same observations")
+    ap.add_argument("--episodes", type=int, default=32)
+    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--seed", type=int, default=5000)
+    ap.add_argument("--figure", default="docs/figures/u_estimation.png")
+    args = ap.parse_args()
+    rec = rollouts(pathlib.Path(args.export), args.episodes, args.steps, args.seed)
+    truth = np.asarray(wrench_to_yaw_frame(rec["u_oracle"], rec["yaw"]))
+    n_obs = 6
+    series = {"observer": rec["obs"][..., -n_obs:], "dpc": estimates(rec, args.export)}
+    rows = {}
+    if args.other:
+        series["other"] = estimates(rec, args.other)
+        own = rollouts(pathlib.Path(args.other), args.episodes, args.steps, args.seed)
+        own_truth = np.asarray(wrench_to_yaw_frame(own["u_oracle"], own["yaw"]))
+        own_u = estimates(own, args.other)
+        rows["other, own loop"] = (own_u[own["alive"]], own_truth[own["alive"]])
+    alive = rec["alive"]
+    rows = {name: (u[alive], truth[alive]) for name, u in series.items()} | rows
+    print(f"{int(alive.sum()):,} steps of {args.episodes} episodes (seeds from {args.seed})")
+    print(
+        "| estimate | " + " | ".join(f"R^2 {c}" for c in COMPONENTS) + " | RMSE f (N) | "
+        "RMSE tau (N·m) |"
+    )
+    print("|---|" + "---|" * 8)
+    for name, (u, true) in rows.items():
+        r2, rmse = scores(u, true)
+        cells = " | ".join(f"{v:.2f}" for v in r2)
+        f_rmse = np.sqrt((rmse[:3] ** 2).mean())
+        t_rmse = np.sqrt((rmse[3:] ** 2).mean())
+        print(f"| {name} | {cells} | {f_rmse:.2f} | {t_rmse:.2f} |")
+    figure(rec, series, truth, pathlib.Path(args.figure))
+
+
+if __name__ == "__main__":
+    main()
