@@ -105,6 +105,7 @@ def test_adapter_errors_are_clear(data, trained):
         Dataset(data.s_body, data.s_arm[:10], data.p_arm, data.s_drp_next)
 
 
+@pytest.mark.slow  # a 'policy' env's compile (~1 min on 2 cores); `make test-all`
 def test_dagger_data_are_the_students_states_labelled_by_the_oracle(data):
     """`collect` with a policy on a 'policy' env (DAgger): the episodes start as MBC's, then the
     student's u (here a constant 30 N down) moves the robot to other states, and each row keeps

@@ -132,6 +132,7 @@ def test_sensor_options_are_checked():
         dpc_mjx.make("a1_arm/reaching", arm="regular", sensor_noise=float("nan"))
 
 
+@pytest.mark.slow  # an env step's compile (~1 min on 2 cores); `make test-all`
 def test_torques_act_one_tick_after_their_measurement():
     """sensor_delay=1: after a step, the ctrl computed at the last tick is still queued, and the
     physics ran on the one computed a tick before (they differ while the robot trots)."""
