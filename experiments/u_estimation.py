@@ -47,7 +47,7 @@ def rollouts(export: pathlib.Path, episodes: int, steps: int, seed: int) -> dict
     policy = artefacts.dpc_policy("regular")
 
     def record(before, after):
-        yaw = jax.vmap(lambda q: roll_pitch_yaw(q)[2])(before.pipeline_state.qpos[:, 3:7])
+        yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
         privileged = before.info["privileged"]
         return {
             "obs": before.obs,

@@ -166,7 +166,7 @@ def collect(
 
     def record(before, after):  # the obs, its oracle u, heading and the next roll/pitch rates
         u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
-        yaw = jax.vmap(lambda q: roll_pitch_yaw(q)[2])(before.pipeline_state.qpos[:, 3:7])
+        yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
         keep = after.done == 0.0  # the next obs is a successor of obs
         return before.obs, u_oracle, yaw, after.obs[:, layout.s_body][:, DRP], keep
 

@@ -42,7 +42,7 @@ import jax.numpy as jp
 from flax import struct
 
 from dpc_mjx.control.state import BodyState
-from dpc_mjx.rotations import rot_z
+from dpc_mjx.rotations import rot_z, yaw_of
 
 # (white-noise std, per-episode bias bound), at sensor_noise = 1; see the module docstring
 TILT = (0.002, 0.01)  # rad, roll and pitch
@@ -128,13 +128,12 @@ def measured(s: BodyState, noise: SensorNoise) -> BodyState:
     r_y = jp.array([[c[1], zero, sn[1]], [zero, one, zero], [-sn[1], zero, c[1]]])
     rot = s.rot @ r_x @ r_y  # (3, 3) body -> world, measured
     w_body = s.rot.T @ s.ang_vel + noise.gyro  # rad/s, trunk frame, what the gyro reads
-    yaw = jp.arctan2(s.rot[1, 0], s.rot[0, 0])
     dq = noise.leg_q.reshape(4, 3)
     dqd = noise.leg_qd.reshape(4, 3)
     return s.replace(
         rot=rot,
         ang_vel=rot @ w_body,
-        com_vel=s.com_vel + rot_z(yaw) @ noise.velocity,
+        com_vel=s.com_vel + rot_z(yaw_of(s.rot)) @ noise.velocity,
         foot_pos=s.foot_pos + jp.einsum("fcj,fj->fc", s.foot_jac, dq),
         foot_vel=s.foot_vel + jp.einsum("fcj,fj->fc", s.foot_jac, dqd),
     )

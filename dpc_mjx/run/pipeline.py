@@ -47,6 +47,9 @@ SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the tra
 DATA_FILE = "data.npz"  # the adapter's samples, in the run's adapter folder
 SUMMARY_FILE = "summary.json"
 EPISODES_FILE = "eval_episodes.csv"  # the evaluation, one row per episode
+# The env options that belong to the policy rather than the task (they follow an export to any
+# task), with the values of exports written before they existed
+_POLICY_ENV_BEFORE = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
 
 
 def train_and_evaluate(
@@ -311,8 +314,7 @@ def env_overrides(artefacts: io.Artefacts) -> dict:
     transfer under the same disturbances; the controller is chosen per use. An export written
     before `EnvConfig.u_frame` and the sensor model existed acted in the world frame and was
     trained with exact sensors."""
-    before = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
-    saved = {**before, **(artefacts.meta.get("env_config") or {})}
+    saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
     return tuples({k: v for k, v in saved.items() if k != "controller"})
 
 
@@ -371,8 +373,7 @@ def evaluate_export(
     # the training task's disturbances; another task brings its own (the policy's frame and
     # sensors stay)
     saved = env_overrides(artefacts)
-    kept = ("u_frame", "sensor_noise", "sensor_delay")
-    overrides = saved if task == trained_on else {k: saved[k] for k in kept}
+    overrides = saved if task == trained_on else {k: saved[k] for k in _POLICY_ENV_BEFORE}
     overrides = {**overrides, **(env or {})}
     return _evaluate_table(
         arms,
