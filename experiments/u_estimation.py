@@ -1,7 +1,8 @@
 """How good is each estimate of u: R^2 and RMSE per component against the oracle, and the paper's
 figure "output parameters under a sudden force".
 
-    python experiments/u_estimation.py [--export DIR] [--other DIR] [--episodes 32] [--seed 5000]
+    python experiments/u_estimation.py [--export DIR] [--other DIR] [--other-label NAME]
+        [--episodes 32] [--seed 5000]
 
 Held-out rollouts: `--episodes` episodes of the reaching task (regular arm, the export's env
 options, sensors as configured there) under the export's own DPC, from seeds `--seed`.. that
@@ -11,7 +12,8 @@ y left, z up; torques about the A1 COM):
 
     observer   the disturbance observer's estimate u_obs (what the `observer` controller uses)
     dpc        the export's policy, u = u_scale * pi(obs) (the default recipe)
-    other      `--other`'s policy on the same observations (e.g. another recipe's export)
+    other      `--other`'s policy on the same observations (e.g. another recipe's export;
+               named `--other-label`)
     other, own loop   `--other`'s policy on rollouts under its own control (same seeds)
 
 A learned estimate is only as good as the states it is asked on: the first three rows share the
@@ -111,11 +113,11 @@ def figure(rec: dict, series: dict[str, np.ndarray], truth: np.ndarray, path: pa
     fig, axes = plt.subplots(4, 1, figsize=(8, 9), sharex=True)
     axes[0].plot(t, force[window, b], "k")
     axes[0].set_ylabel("push |F| (N)")
-    styles = {"oracle": "k", "observer": "tab:orange", "dpc": "tab:blue", "other": "tab:green"}
+    styles = {"oracle": "k", "observer": "tab:orange", "dpc": "tab:blue"}
     for ax, i, unit in zip(axes[1:], (2, 3, 4), ("N", "N·m", "N·m"), strict=True):
         ax.plot(t, truth[window, b, i], styles["oracle"], label="oracle (measured)")
         for name, u in series.items():
-            ax.plot(t, u[window, b, i], color=styles[name], label=name)
+            ax.plot(t, u[window, b, i], color=styles.get(name, "tab:green"), label=name)
         ax.set_ylabel(f"{COMPONENTS[i]} ({unit})")
     axes[1].legend(loc="best", fontsize=8)
     axes[-1].set_xlabel("time from push onset (s)")
@@ -130,6 +132,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--export", default=str(SHIPPED))
     ap.add_argument("--other", help="a second export, evaluated on the same observations")
+    ap.add_argument("--other-label", default="other", help="its name in the table and figure")
     ap.add_argument("--episodes", type=int, default=32)
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=5000)
@@ -141,11 +144,11 @@ def main() -> None:
     series = {"observer": rec["obs"][..., -n_obs:], "dpc": estimates(rec, args.export)}
     rows = {}
     if args.other:
-        series["other"] = estimates(rec, args.other)
+        series[args.other_label] = estimates(rec, args.other)
         own = rollouts(pathlib.Path(args.other), args.episodes, args.steps, args.seed)
         own_truth = np.asarray(wrench_to_yaw_frame(own["u_oracle"], own["yaw"]))
         own_u = estimates(own, args.other)
-        rows["other, own loop"] = (own_u[own["alive"]], own_truth[own["alive"]])
+        rows[f"{args.other_label}, own loop"] = (own_u[own["alive"]], own_truth[own["alive"]])
     alive = rec["alive"]
     rows = {name: (u[alive], truth[alive]) for name, u in series.items()} | rows
     print(f"{int(alive.sum()):,} steps of {args.episodes} episodes (seeds from {args.seed})")

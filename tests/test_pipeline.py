@@ -8,8 +8,9 @@ import pytest
 from dpc_mjx import DpcError, io
 from dpc_mjx.io.serialization import jsonable
 from dpc_mjx.run import cli
-from dpc_mjx.run.config import RunConfig, read_run_config, start_run
-from dpc_mjx.run.pipeline import SHIPPED
+from dpc_mjx.run.config import RunConfig, read_run_config, recipe, start_run, tuples
+from dpc_mjx.run.pipeline import SHIPPED, SHIPPED_PAPER
+from dpc_mjx.sac import SacConfig
 
 
 def test_run_config_takes_dotted_overrides_and_round_trips_through_json(tmp_path):
@@ -42,6 +43,23 @@ def test_run_config_rejects_unknown_or_invalid_options():
     with pytest.raises(DpcError, match="trains nothing: set sac.num_timesteps"):
         RunConfig().replace(actor_init="random")  # the default has no SAC stage
     assert RunConfig().replace(actor_init="random", **{"sac.num_timesteps": 100_000})
+    with pytest.raises(DpcError, match="critic_privileged .* needs actor_init='random'"):
+        RunConfig().replace(**{"sac.critic_privileged": True, "sac.num_timesteps": 100_000})
+    with pytest.raises(DpcError, match="must be true or false"):
+        RunConfig().replace(**{"sac.critic_privileged": "yes"})
+    with pytest.raises(DpcError, match="Unknown recipe 'papers'"):
+        recipe("papers")
+
+
+def test_the_paper_recipe_is_sac_from_a_random_actor_with_an_asymmetric_critic(tmp_path):
+    paper = recipe("paper")
+    assert paper.actor_init == "random" and paper.sac.critic_privileged
+    assert paper.sac.num_timesteps == 1_000_000 and paper.dagger_rounds == 0
+    assert recipe("default") == RunConfig()
+    args = cli._parser().parse_args(
+        ["train", "--run", str(tmp_path), "--recipe", "paper", "--set", "sac.num_envs=32"]
+    )
+    assert cli._run_config(args) == paper.replace(**{"sac.num_envs": 32})
 
 
 def test_cli_reports_bad_input_with_the_library_error(tmp_path, capsys):
@@ -62,10 +80,27 @@ def test_shipped_artefacts_load_and_are_the_default_recipe():
     art = io.load(SHIPPED)
     assert set(art.encoders) == {"regular"} and art.meta["extra"]["task"] == "a1_arm/reaching"
     defaults = RunConfig()
-    assert art.meta["sac_config"] == jsonable(dataclasses.asdict(defaults.sac))
+    # read with today's SacConfig (options added since default to what the export did)
+    assert SacConfig(**tuples(art.meta["sac_config"])) == defaults.sac
     assert art.meta["adapter_config"] == jsonable(dataclasses.asdict(defaults.adapter))
     assert art.meta["extra"]["actor_init"] == defaults.actor_init
     assert art.meta["extra"]["policy_input"] == defaults.policy_input == "paper"
     assert art.policy.inputs == ("s_body", "z") and defaults.sac.num_timesteps == 0
     env = art.meta["env_config"]  # the default reaching task: yaw-frame u, the robot's sensors
     assert (env["u_frame"], env["sensor_noise"], env["sensor_delay"]) == ("yaw", 1.0, 1)
+
+
+def test_shipped_paper_export_is_the_paper_recipe_and_its_actor_sees_no_privileged_value():
+    """`regular-paper`: SAC from a random actor with the asymmetric critic; the exported actor's
+    observation is the paper's `[s_body, z]`, nothing privileged."""
+    art = io.load(SHIPPED_PAPER)
+    paper = recipe("paper")
+    assert SacConfig(**tuples(art.meta["sac_config"])) == paper.sac
+    assert (
+        art.meta["extra"]["actor_init"] == "random" and art.meta["sac_config"]["critic_privileged"]
+    )
+    assert art.meta["extra"]["sac_env_steps"] >= paper.sac.num_timesteps
+    assert art.policy.inputs == ("s_body", "z")
+    layout = art.meta["policy"]["observation_layout"]
+    assert len(layout) == art.policy.obs_norm.mean.shape[-1] == 11 + art.adapter_config.latent_size
+    assert not any("oracle" in name or "push" in name or "payload" in name for name in layout)

@@ -7,18 +7,25 @@ import jax
 import jax.numpy as jp
 import numpy as np
 import pytest
+from brax.training.acme import running_statistics
+from brax.training.agents.sac import networks as sac_networks
+from flax import linen
 from helpers import CountTraces
 
 import dpc_mjx
 from dpc_mjx import DpcError
 from dpc_mjx.adapter import AdapterConfig, Dataset, EncoderState, Normalizer, encode
 from dpc_mjx.adapter.networks import encoder_module
-from dpc_mjx.rotations import wrench_to_world
+from dpc_mjx.envs.observations import PRIVILEGED, PRIVILEGED_SIZE
+from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world, wrench_to_yaw_frame
 from dpc_mjx.sac import (
+    HIDDEN,
     POLICY_INPUTS,
     LatentObsWrapper,
+    PrivilegedCriticWrapper,
     SacConfig,
     act,
+    make_networks,
     make_trainer,
     policy_state,
     train,
@@ -79,9 +86,11 @@ def test_latent_env_shows_the_policy_body_state_and_z(latent_env):
 
 
 def test_sac_trains_resumes_after_a_kill_and_traces_the_env_once(latent_env, tmp_path):
+    """With the asymmetric critic (the paper recipe's; `critic_privileged`)."""
     _, wrapped = latent_env
     counted = CountTraces(wrapped)
-    trainer = make_trainer(counted, _CONFIG)  # reused after the "kill": no second compile
+    config = dataclasses.replace(_CONFIG, critic_privileged=True)
+    trainer = make_trainer(counted, config)  # reused after the "kill": no second compile
 
     def kill_after_two(row):
         if row["epoch"] == 2:
@@ -105,9 +114,72 @@ def test_sac_trains_resumes_after_a_kill_and_traces_the_env_once(latent_env, tmp
         assert np.isfinite(r["eval_mbc_return"])  # the same episodes with u = 0
     log = (tmp_path / "sac_log.csv").read_text().splitlines()
     assert len(log) == 1 + 4  # header + epoch 0 + one row per epoch, across the kill
-    obs = jp.zeros((4, wrapped.observation_size))
+    obs = jp.zeros((4, wrapped.observation_size))  # the policy's: no privileged values
+    assert result.policy.obs_norm.mean.shape == (wrapped.observation_size,)
     action = act(result.policy, obs)
     assert action.shape == (4, 6) and np.all(np.abs(np.asarray(action)) <= 1.0)
+
+
+def test_the_asymmetric_critic_sees_privileged_values_and_the_actor_never_does(latent_env):
+    env, wrapped = latent_env
+    trainer = make_trainer(wrapped, dataclasses.replace(_CONFIG, critic_privileged=True))
+    n_policy = wrapped.observation_size  # [s_body, z]
+    assert trainer.observation_size == n_policy
+    assert trainer.critic_observation_size == n_policy + PRIVILEGED_SIZE
+    # the critics' view: the policy's observation, then u_oracle and the push in the yaw frame
+    critic_env = PrivilegedCriticWrapper(wrapped)
+    key = jax.random.PRNGKey(3)
+    state, policy_view = jax.jit(lambda k: (critic_env.reset(k), wrapped.reset(k)))(key)
+    np.testing.assert_array_equal(state.obs[:n_policy], policy_view.obs)
+    yaw = roll_pitch_yaw(state.pipeline_state.qpos[3:7])[2]
+    u_world = state.info["privileged"][PRIVILEGED["u_oracle"]]
+    np.testing.assert_allclose(
+        state.obs[n_policy : n_policy + 6], wrench_to_yaw_frame(u_world, yaw), rtol=1e-6
+    )
+    np.testing.assert_array_equal(state.obs[n_policy + 6], state.info["privileged"][6])
+    # the actor reads the policy's part only; the critics read all of it
+    carry = trainer.init(jax.random.PRNGKey(0))
+    ts, nets = carry.training, trainer.networks
+    stats = ts.normalizer.replace(
+        mean=jp.linspace(-1.0, 1.0, trainer.critic_observation_size),
+        std=jp.linspace(0.5, 2.0, trainer.critic_observation_size),
+    )
+    full = jax.random.normal(key, (5, trainer.critic_observation_size))
+    other = full.at[:, n_policy:].add(3.0)  # other privileged values
+    pi = nets.policy_network.apply
+    np.testing.assert_array_equal(
+        pi(stats, ts.policy_params, full), pi(stats, ts.policy_params, other)
+    )
+    q, a = nets.q_network.apply, jp.zeros((5, 6))
+    assert not np.allclose(q(stats, ts.q_params, full, a), q(stats, ts.q_params, other, a))
+    # the exported actor: the policy's observation and its part of the statistics, same actions
+    policy = policy_state(trainer, ts.policy_params, stats)
+    assert policy.obs_norm.mean.shape == (n_policy,) and policy.inputs == POLICY_INPUTS["paper"]
+    loc = pi(stats, ts.policy_params, full)[:, :6]
+    np.testing.assert_allclose(act(policy, full[:, :n_policy]), jp.tanh(loc), atol=1e-6)
+    with pytest.raises(DpcError, match="asymmetric critic"):
+        regress_actor(trainer, carry, wrapped.adapter_config, wrapped.encoder, None, None)
+
+
+def test_networks_are_braxs_sac_networks_without_the_privileged_values():
+    """`make_networks` builds brax's `make_sac_networks` (same parameters from the same key)."""
+    ours, brax_nets = (
+        make_networks(13, 6),
+        sac_networks.make_sac_networks(
+            13,
+            6,
+            preprocess_observations_fn=running_statistics.normalize,
+            hidden_layer_sizes=HIDDEN,
+            activation=linen.relu,
+        ),
+    )
+    key = jax.random.PRNGKey(1)
+    for mine, theirs in (
+        (ours.policy_network, brax_nets.policy_network),
+        (ours.q_network, brax_nets.q_network),
+    ):
+        for x, y in zip(jax.tree.leaves(mine.init(key)), jax.tree.leaves(theirs.init(key))):
+            np.testing.assert_array_equal(x, y)
 
 
 def test_resume_without_a_checkpoint_or_with_another_config_fails_clearly(latent_env, tmp_path):

@@ -70,6 +70,14 @@ def test_paired_rows_compare_dpc_with_each_controller_on_the_same_episodes():
         _cell("oracle", [3.0, 4.0, 5.0, 6.0], [0, 0, 0, 0]),
     ]
     rows = paired_rows(cells)
-    assert rows[0].startswith("| regular: dpc - mbc | +2.0 [+2.0, +2.0] | 0 | 2 | 0.5 |")
-    assert rows[1].startswith("| regular: dpc - oracle | -1.0 [-1.0, -1.0] | 1 | 0 | 1 |")
+    # fall-rate difference: the mean of the per-episode differences (-1, 0, -1, 0) and its
+    # normal interval, -0.5 +- 1.96 * std / 2
+    half = 1.96 * np.std([-1, 0, -1, 0], ddof=1) / 2
+    assert rows[0].startswith(
+        f"| regular: dpc - mbc | +2.0 [+2.0, +2.0] | -0.500 [{-0.5 - half:+.3f}, "
+        f"{-0.5 + half:+.3f}] | 0 | 2 | 0.5 |"
+    )
+    assert rows[1].startswith(
+        "| regular: dpc - oracle | -1.0 [-1.0, -1.0] | +0.250 [-0.240, +0.740] | 1 | 0 | 1 |"
+    )
     assert "dpc closes 67% of the MBC-to-oracle gap" in rows[2]  # (3 - 1) / (3 - 0)

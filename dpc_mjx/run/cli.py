@@ -2,6 +2,7 @@
 
     dpc-mjx demo                       a small run, then MBC / observer / DPC (minutes)
     dpc-mjx train --run runs/x         data -> adapter -> policy (-> SAC) -> export -> evaluation
+                                       (`--recipe paper`: SAC from a random actor)
     dpc-mjx train-adapter --run runs/x only the adapter stage (continue with train --resume)
     dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
     dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
@@ -40,14 +41,14 @@ def _parse_sets(items: list[str]) -> dict:
 
 
 def _run_config(args: argparse.Namespace):
-    from dpc_mjx.run.config import RunConfig
+    from dpc_mjx.run.config import recipe
 
     named = {k: getattr(args, k) for k in ("arm", "samples", "task") if getattr(args, k, None)}
     if getattr(args, "timesteps", None):
         named["sac.num_timesteps"] = args.timesteps
     if getattr(args, "episodes", None):
         named["eval_episodes"] = args.episodes
-    return RunConfig().replace(**named, **_parse_sets(args.set))
+    return recipe(getattr(args, "recipe", "default")).replace(**named, **_parse_sets(args.set))
 
 
 def _train(args: argparse.Namespace) -> None:
@@ -144,6 +145,12 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--arm", help="arm variant (default regular)")
         p.add_argument("--task", help="task (default a1_arm/reaching)")
         p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
+        p.add_argument(
+            "--recipe",
+            default="default",
+            help="named settings the --set options change: default (the oracle regression), "
+            "paper (SAC from a random actor, asymmetric critic)",
+        )
         p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
         if resume:
             p.add_argument(

@@ -213,9 +213,24 @@ def write_episodes_csv(path: str | pathlib.Path, cells: list[CellResult]) -> pat
 
 
 PAIRED_HEADER = (
-    "| comparison (same episodes) | return difference [95% CI] | only the first fell | only the "
-    "second fell | McNemar p |\n|---|---|---|---|---|"
+    "| comparison (same episodes) | return difference [95% CI] | fall-rate difference [95% CI] "
+    "| only the first fell | only the second fell | McNemar p |\n|---|---|---|---|---|---|"
 )
+
+
+def paired_row(label: str, first: tuple, second: tuple) -> str:
+    """One row under `PAIRED_HEADER`: `first` minus `second`, each (fell, return) per episode
+    (episodes,) on the same episodes: the return difference and the fall-rate difference (the
+    mean of the per-episode differences of the fall indicators) with paired 95% intervals, the
+    discordant falls and the exact McNemar p."""
+    (fell_a, ret_a), (fell_b, ret_b) = first, second
+    diff, lo, hi = paired_diff_ci(np.asarray(ret_a), np.asarray(ret_b))
+    f_diff, f_lo, f_hi = paired_diff_ci(np.asarray(fell_a, float), np.asarray(fell_b, float))
+    only_a, only_b = mcnemar_counts(np.asarray(fell_a) > 0, np.asarray(fell_b) > 0)
+    return (
+        f"| {label} | {diff:+.1f} [{lo:+.1f}, {hi:+.1f}] | {f_diff:+.3f} [{f_lo:+.3f}, "
+        f"{f_hi:+.3f}] | {only_a} | {only_b} | {mcnemar_p(only_a, only_b):.2g} |"
+    )
 
 
 def paired_rows(cells: list[CellResult]) -> list[str]:
@@ -232,11 +247,12 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
         for name, b in mine.items():
             if name == first:
                 continue
-            diff, lo, hi = paired_diff_ci(a.per_episode["return"], b.per_episode["return"])
-            only_a, only_b = mcnemar_counts(a.per_episode["fell"], b.per_episode["fell"])
             rows.append(
-                f"| {arm}: {first} - {name} | {diff:+.1f} [{lo:+.1f}, {hi:+.1f}] | {only_a} | "
-                f"{only_b} | {mcnemar_p(only_a, only_b):.2g} |"
+                paired_row(
+                    f"{arm}: {first} - {name}",
+                    (a.per_episode["fell"], a.per_episode["return"]),
+                    (b.per_episode["fell"], b.per_episode["return"]),
+                )
             )
         if "mbc" in mine and "oracle" in mine and mine["mbc"].falls > mine["oracle"].falls:
             gap = mine["mbc"].falls - mine["oracle"].falls
@@ -245,6 +261,6 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
                     share = (mine["mbc"].falls - mine[name].falls) / gap
                     rows.append(
                         f"| {arm}: {name} closes {share:.0%} of the MBC-to-oracle gap "
-                        "in falls | | | | |"
+                        "in falls | | | | | |"
                     )
     return rows

@@ -44,6 +44,8 @@ from dpc_mjx.run.eval import (
 from dpc_mjx.sac import warm_start
 
 SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the trained run's export
+# the paper's recipe (`RECIPES["paper"]`: SAC from a random actor, no oracle label for the actor)
+SHIPPED_PAPER = SHIPPED.with_name("regular-paper")
 DATA_FILE = "data.npz"  # the adapter's samples, in the run's adapter folder
 SUMMARY_FILE = "summary.json"
 EPISODES_FILE = "eval_episodes.csv"  # the evaluation, one row per episode

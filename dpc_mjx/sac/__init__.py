@@ -1,7 +1,8 @@
 """The high-level estimator (paper §III-C): SAC on `[s_body, z]` (or `[s_body, z, u_obs]`),
 acting through u = [f_a, tau_a].
 
-    env.py         `LatentObsWrapper`: a DPC env as the policy sees it (`POLICY_INPUTS`)
+    env.py         `LatentObsWrapper`: a DPC env as the policy sees it (`POLICY_INPUTS`);
+                   `PrivilegedCriticWrapper`: plus what the asymmetric critic sees
     networks.py    brax's SAC actor and twin critics at the paper's sizes
     config.py      `SacConfig`: the hyperparameters (brax's SAC's, and those of our loop)
     trainer.py     `make_trainer`: the jitted pieces, brax's SAC in our epoch, the evaluation
@@ -17,7 +18,7 @@ policy = dpc_policy(adapter.config, adapter.encoder, result.policy)   # raw obs 
 """
 
 from dpc_mjx.sac.config import SacConfig
-from dpc_mjx.sac.env import LatentObsWrapper
+from dpc_mjx.sac.env import LatentObsWrapper, PrivilegedCriticWrapper
 from dpc_mjx.sac.networks import HIDDEN, make_networks
 from dpc_mjx.sac.policy import POLICY_INPUTS, PolicyState, act, dpc_policy, inputs_named
 from dpc_mjx.sac.train import TrainResult, policy_state, restore_policy, train
@@ -26,6 +27,7 @@ from dpc_mjx.sac.trainer import make_trainer
 __all__ = [
     "HIDDEN",
     "LatentObsWrapper",
+    "PrivilegedCriticWrapper",
     "POLICY_INPUTS",
     "PolicyState",
     "SacConfig",

@@ -4,8 +4,9 @@ Most are the options of brax's SAC (`brax.training.agents.sac.train`): batch siz
 per actor step, learning rate, discount, reward scaling, Polyak rate `tau`, replay sizes, the
 observation normalisation, the paper's 2 x 128 networks (`hidden`). Ours, for our loop
 (`sac.train`): a separate actor learning rate, the initial entropy temperature, the critic
-warm-up (`actor_warmup_steps`), the epoch length (one jitted call, one log row, one checkpoint)
-and the periodic deterministic evaluation with best-policy selection (`eval_*`, `keep_best`).
+warm-up (`actor_warmup_steps`), an asymmetric critic (`critic_privileged`), the epoch length
+(one jitted call, one log row, one checkpoint) and the periodic deterministic evaluation with
+best-policy selection (`eval_*`, `keep_best`).
 The env's own options live in its `EnvConfig`.
 """
 
@@ -43,6 +44,9 @@ class SacConfig:
     max_replay_size: int = 200_000  # bounded explicitly (brax defaults it to num_timesteps)
     hidden: tuple[int, ...] = HIDDEN
     normalize_observations: bool = True
+    # Asymmetric actor-critic: the critics also see the privileged values [u_oracle, payload,
+    # ee push force] (yaw frame, `sac.env.PrivilegedCriticWrapper`); the actor never does
+    critic_privileged: bool = False
     epoch_steps: int = 16_384  # env steps per jitted epoch: one log row and one checkpoint
     # Every `eval_every` epochs (0: never) the deterministic policy runs `eval_envs` episodes of
     # the env's episode length from fixed seeds (the same ones each time, so checkpoints are
@@ -78,6 +82,11 @@ class SacConfig:
                 f"SacConfig.max_replay_size={self.max_replay_size} must hold at least "
                 f"min_replay_size={self.min_replay_size} and batch_size={self.batch_size}."
             )
+        for name in ("normalize_observations", "critic_privileged", "keep_best"):
+            if not isinstance(getattr(self, name), bool):
+                raise DpcError(
+                    f"SacConfig.{name} must be true or false, got {getattr(self, name)!r}."
+                )
         for name in ("learning_rate", "reward_scaling", "tau", "init_alpha"):
             if not getattr(self, name) > 0:
                 raise DpcError(f"SacConfig.{name} must be > 0, got {getattr(self, name)}.")

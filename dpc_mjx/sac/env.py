@@ -5,16 +5,25 @@ it replaces the env's observation `[s_body, s_arm, p_arm, u_obs]` by the policy'
 `sac.policy`): `[s_body (11), z (latent_size)]` (the paper's) or `[s_body, z, u_obs (6)]`, z
 computed inside `reset`/`step` by a frozen encoder (`adapter.encode`), so the policy never sees
 the arm's joints: the same policy serves any arm that has an encoder.
+
+`PrivilegedCriticWrapper` (around a `LatentObsWrapper` or a wrapper of one, for SAC's asymmetric
+critic, `SacConfig.critic_privileged`) appends what only a simulator knows: `[policy obs,
+u_oracle (6), payload (1), ee push force (3)]`, u_oracle and the push force in the yaw frame (the
+policy's u frame; `observations.PRIVILEGED`). The trainer's critics read all of it, its actor
+only the policy's part (`sac.networks`); an exported policy never sees it.
 """
 
 from __future__ import annotations
 
 import jax
+import jax.numpy as jp
 from brax.envs.base import State, Wrapper
 
 from dpc_mjx.adapter.networks import AdapterConfig, EncoderState
 from dpc_mjx.envs.base import DpcEnv
+from dpc_mjx.envs.observations import PRIVILEGED, PRIVILEGED_SIZE
 from dpc_mjx.errors import DpcError
+from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
 from dpc_mjx.sac.policy import PAPER_INPUTS, observation_size, policy_observation
 
 
@@ -58,3 +67,35 @@ class LatentObsWrapper(Wrapper):
         # The inner env reads only pipeline_state and info, never the observation it returned.
         state = self.env.step(state, action)
         return state.replace(obs=self.latent_obs(state.obs))
+
+
+class PrivilegedCriticWrapper(Wrapper):
+    """obs `[policy obs]` -> `[policy obs, privileged (10,), yaw frame]` (module docstring)."""
+
+    def __init__(self, env: Wrapper):
+        super().__init__(env)
+        if not isinstance(env.unwrapped, DpcEnv) or env is env.unwrapped:
+            raise DpcError(
+                "PrivilegedCriticWrapper wraps the policy's view of a DpcEnv (a LatentObsWrapper)."
+            )
+        self.policy_inputs = getattr(env, "policy_inputs", PAPER_INPUTS)
+        self.policy_observation_size = env.observation_size
+
+    @property
+    def observation_size(self) -> int:
+        return self.policy_observation_size + PRIVILEGED_SIZE
+
+    def with_privileged(self, state: State) -> State:
+        priv = state.info["privileged"]  # (10,) world frame
+        yaw = roll_pitch_yaw(state.pipeline_state.qpos[3:7])[2]  # () rad, the trunk's heading
+        u = wrench_to_yaw_frame(priv[PRIVILEGED["u_oracle"]], yaw)
+        push = wrench_to_yaw_frame(jp.concatenate([priv[PRIVILEGED["ee_force"]], jp.zeros(3)]), yaw)
+        extra = jp.concatenate([u, priv[PRIVILEGED["payload"]], push[:3]])
+        return state.replace(obs=jp.concatenate([state.obs, extra]))
+
+    def reset(self, rng: jax.Array) -> State:
+        return self.with_privileged(self.env.reset(rng))
+
+    def step(self, state: State, action: jax.Array) -> State:
+        # The inner wrapper rebuilds its observation from pipeline_state, never reads state.obs.
+        return self.with_privileged(self.env.step(state, action))

@@ -142,9 +142,9 @@ def restore_policy(env: Env, config: SacConfig, run_dir: str | pathlib.Path) -> 
 
 def policy_state(trainer: Trainer, policy_params: dict, normalizer) -> PolicyState:
     """The deployable actor: its parameters and observation statistics (brax running stats)."""
-    n = trainer.observation_size
+    n = trainer.observation_size  # the actor's part of the statistics (asymmetric critic)
     if trainer.config.normalize_observations:
-        norm = Normalizer(mean=normalizer.mean, std=normalizer.std)
+        norm = Normalizer(mean=normalizer.mean[..., :n], std=normalizer.std[..., :n])
     else:
         norm = Normalizer(mean=jp.zeros(n), std=jp.ones(n))
     return PolicyState(

@@ -33,6 +33,7 @@ from flax import struct
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.wrappers import wrap_for_training
 from dpc_mjx.sac.config import SacConfig
+from dpc_mjx.sac.env import PrivilegedCriticWrapper
 from dpc_mjx.sac.networks import make_networks
 from dpc_mjx.sac.policy import PAPER_INPUTS
 
@@ -82,7 +83,8 @@ class Trainer:
     """The jitted pieces of one SAC run on one env (see `make_trainer`)."""
 
     config: SacConfig
-    observation_size: int
+    observation_size: int  # the actor's (policy) observation
+    critic_observation_size: int  # what the replay buffer and the critics hold (>= the actor's)
     action_size: int
     policy_inputs: tuple[str, ...]  # the blocks of the observation (`sac.policy.POLICY_INPUTS`)
     networks: sac_networks.SACNetworks
@@ -107,11 +109,22 @@ class Trainer:
 
 
 def make_trainer(env, config: SacConfig) -> Trainer:
-    """Build the SAC run on `env` (one unbatched env, e.g. a `LatentObsWrapper`)."""
+    """Build the SAC run on `env` (one unbatched env, e.g. a `LatentObsWrapper`; with
+    `config.critic_privileged`, the trainer extends its observation with the privileged values
+    for the critics, `PrivilegedCriticWrapper`)."""
     config.validate()
+    policy_obs_size = env.observation_size  # the actor's input
+    if config.critic_privileged:  # the privileged values come from the DpcEnv inside
+        env = PrivilegedCriticWrapper(env)
     batched = wrap_for_training(env)
-    obs_size, action_size = env.observation_size, env.action_size
-    nets = make_networks(obs_size, action_size, config.hidden, config.normalize_observations)
+    obs_size, action_size = env.observation_size, env.action_size  # obs_size: what is stored
+    nets = make_networks(
+        policy_obs_size,
+        action_size,
+        config.hidden,
+        config.normalize_observations,
+        critic_extra=obs_size - policy_obs_size,
+    )
     make_policy = sac_networks.make_inference_fn(nets)
     alpha_loss, critic_loss, actor_loss = sac_losses.make_losses(
         nets, config.reward_scaling, config.discounting, action_size
@@ -288,7 +301,8 @@ def make_trainer(env, config: SacConfig) -> Trainer:
 
     return Trainer(
         config=config,
-        observation_size=obs_size,
+        observation_size=policy_obs_size,
+        critic_observation_size=obs_size,
         policy_inputs=tuple(getattr(env, "policy_inputs", PAPER_INPUTS)),
         action_size=action_size,
         networks=nets,

@@ -64,6 +64,12 @@ def regress_actor(
             f"with latent_size {adapter_config.latent_size} make "
             f"{observation_size(trainer.policy_inputs, adapter_config.latent_size)}."
         )
+    if trainer.critic_observation_size != trainer.observation_size:
+        raise DpcError(
+            "The oracle regression cannot start a run with an asymmetric critic "
+            "(SacConfig.critic_privileged): its data has no privileged values for the critics' "
+            "statistics. Use actor_init='random' or critic_privileged=false."
+        )
     u_scale = np.asarray(u_scale, np.float32)
 
     def arrays(part: Dataset) -> tuple[jax.Array, jax.Array]:
