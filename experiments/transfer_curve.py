@@ -24,7 +24,7 @@ import pathlib
 
 from dpc_mjx import adapter, io
 from dpc_mjx.envs.registry import make
-from dpc_mjx.run.eval import evaluate_env, table_row
+from dpc_mjx.run.eval import evaluate, table_row
 from dpc_mjx.run.pipeline import SHIPPED, env_overrides
 from dpc_mjx.run.stats import mcnemar_counts, mcnemar_p, paired_diff_ci
 from dpc_mjx.sac import dpc_policy
@@ -59,26 +59,39 @@ def main() -> None:
     )
     config = dataclasses.replace(art.adapter_config, seed=args.data_seed)
 
-    def cell(controller: str, policy=None, label: str | None = None):
-        env_controller = "policy" if policy is not None else controller
-        env = make(TASK, arm=args.arm, controller=env_controller, **overrides)
-        c = evaluate_env(
-            env, args.arm, label or controller, args.episodes, args.steps, args.seed, policy
-        )
+    def show(c) -> None:
         print(table_row(c), flush=True)
+
+    def run(controllers: list[str], policy=None, on_result=show) -> list:
+        """The protocol's cells (`run.eval.evaluate`) on this arm and the episodes above."""
+        return evaluate(
+            [args.arm],
+            controllers,
+            task=TASK,
+            episodes=args.episodes,
+            steps=args.steps,
+            seed=args.seed,
+            dpc_policy_for=None if policy is None else (lambda _: policy),
+            overrides=overrides,
+            on_result=on_result,
+        )
+
+    def cell(policy, label: str):
+        c = dataclasses.replace(run(["dpc"], policy, on_result=None)[0], controller=label)
+        show(c)
         return c
 
-    cells = [cell(name) for name in ("mbc", "observer", "oracle")]
+    cells = run(["mbc", "observer", "oracle"])
     for n in sorted(args.budgets):
         encoder, history = adapter.transfer(data.take(slice(0, n)), art.decoder, config)
         print(f"{n:,} samples: held-out NLL {min(history['val_nll']):.3f}", flush=True)
         cells.append(
-            cell("dpc", dpc_policy(art.adapter_config, encoder, art.policy), f"dpc, {n:,} samples")
+            cell(dpc_policy(art.adapter_config, encoder, art.policy), f"dpc, {n:,} samples")
         )
     if args.full:
         full = io.load(args.full)
         policy = dpc_policy(full.adapter_config, full.encoder(args.arm), full.policy)
-        cells.append(cell("dpc", policy, "dpc, trained for this arm"))
+        cells.append(cell(policy, "dpc, trained for this arm"))
 
     mbc = cells[0]
     full_return = cells[-1].mean_return if args.full else None

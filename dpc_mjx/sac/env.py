@@ -23,7 +23,7 @@ from dpc_mjx.adapter.networks import AdapterConfig, EncoderState
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.observations import PRIVILEGED, PRIVILEGED_SIZE
 from dpc_mjx.errors import DpcError
-from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
+from dpc_mjx.rotations import roll_pitch_yaw, rot_z, wrench_to_yaw_frame
 from dpc_mjx.sac.policy import PAPER_INPUTS, observation_size, policy_observation
 
 
@@ -89,8 +89,8 @@ class PrivilegedCriticWrapper(Wrapper):
         priv = state.info["privileged"]  # (10,) world frame
         yaw = roll_pitch_yaw(state.pipeline_state.qpos[3:7])[2]  # () rad, the trunk's heading
         u = wrench_to_yaw_frame(priv[PRIVILEGED["u_oracle"]], yaw)
-        push = wrench_to_yaw_frame(jp.concatenate([priv[PRIVILEGED["ee_force"]], jp.zeros(3)]), yaw)
-        extra = jp.concatenate([u, priv[PRIVILEGED["payload"]], push[:3]])
+        push = rot_z(yaw).T @ priv[PRIVILEGED["ee_force"]]  # (3,) N, world -> yaw frame
+        extra = jp.concatenate([u, priv[PRIVILEGED["payload"]], push])
         return state.replace(obs=jp.concatenate([state.obs, extra]))
 
     def reset(self, rng: jax.Array) -> State:
