@@ -61,6 +61,7 @@ def _assert_as_recorded(cells, recording: dict) -> None:
 def _evaluate_shipped(csv_path=None, controllers=None):
     return evaluate_export(
         SHIPPED,
+        arms=["regular"],
         controllers=controllers or ["mbc", "observer", "dpc", "oracle"],
         episodes=EPISODES,
         steps=STEPS,

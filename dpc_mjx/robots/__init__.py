@@ -1,14 +1,17 @@
-"""The A1 with parametric or URDF arms: specs, named variants, compiled models, batched params,
-and the scene objects (`objects`: boxes, tables, balls, weld grasps; the tasks that place them
-own their scenes in `dpc_mjx.envs.tasks`)."""
+"""The A1 with parametric arms or arms from files (named URDFs, or your own URDF/MJCF): specs,
+named variants, compiled models, batched params, static balance, and the scene objects
+(`objects`: boxes, tables, balls, weld grasps; the tasks that place them own their scenes in
+`dpc_mjx.envs.tasks`)."""
 
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
 from dpc_mjx.robots.assemble import build, build_spec, robot_spec
 from dpc_mjx.robots.layout import Layout, layout, mount_wrench
 from dpc_mjx.robots.objects import prop_layout
 from dpc_mjx.robots.params import batch_arm_params
+from dpc_mjx.robots.spec_json import arm_argument, read_arm_description
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
-from dpc_mjx.robots.variants import VARIANTS, RobotSpec, resolve
+from dpc_mjx.robots.static_balance import static_balance
+from dpc_mjx.robots.variants import VARIANTS, RobotSpec, arm_name, resolve
 
 __all__ = [
     "VARIANTS",
@@ -17,6 +20,8 @@ __all__ = [
     "Mount",
     "RobotSpec",
     "UrdfArm",
+    "arm_argument",
+    "arm_name",
     "batch_arm_params",
     "build",
     "build_spec",
@@ -25,7 +30,9 @@ __all__ = [
     "mount_wrench",
     "perturbed_home",
     "prop_layout",
+    "read_arm_description",
     "resolve",
     "robot_spec",
+    "static_balance",
     "with_leg_servos",
 ]

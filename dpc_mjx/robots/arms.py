@@ -1,8 +1,9 @@
 """Arms that mount on the A1 trunk.
 
 `ArmSpec` is a WidowX-like parametric arm built from primitives: waist (yaw), shoulder, elbow and
-wrist (pitch) hinges plus a one-finger parallel gripper. `UrdfArm` is an arm from the
-example-robot-data wheel (SO-100, Unitree Z1), structurally different, used to test transfer.
+wrist (pitch) hinges plus a one-finger parallel gripper. `UrdfArm` is an arm from a file: the
+example-robot-data wheel's SO-100 and Unitree Z1 (structurally different, used to test transfer)
+or a user's own URDF or MJCF file (`dpc_mjx.robots.arm_file`).
 
 Every arm is built as its own `MjSpec` whose root body (the arm's base, fixed to the trunk) holds a
 site `mount` with a force and a torque sensor, and is attached to the trunk with a name prefix
@@ -14,13 +15,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import pathlib
 
 import mujoco
 import numpy as np
 
+from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1
-from dpc_mjx.robots.urdf import VISUAL_GROUP, load_urdf, make_visual
+from dpc_mjx.robots import a1, arm_file
+from dpc_mjx.robots.urdf import VISUAL_GROUP, make_visual
 
 MOUNT_SITE = "mount"
 EE_SITE = "ee"
@@ -153,14 +156,77 @@ class ArmSpec:
 
 @dataclasses.dataclass(frozen=True)
 class UrdfArm:
-    """An arm from the example-robot-data wheel, attached at `mount`: 'so100' or 'z1'."""
+    """An arm from a file, attached at `mount`: a name the library knows ('so100', 'z1', URDFs
+    of the example-robot-data wheel) or the path of your own URDF or MJCF file
+    (`dpc_mjx.robots.arm_file` says what the file needs and what is inferred).
 
-    urdf: str
+    root: the body welded to the trunk; ee_body and ee_offset (m, in ee_body's frame): where the
+    end effector is; home: (joint, value) pairs of the home pose (rad, m for a slide), joints not
+    named at 0 (clipped into their range). None or () takes the named arm's values, or for a file
+    what `arm_file` infers.
+    """
+
+    urdf: str  # a name of URDF_ARMS, or the path of a .urdf or MJCF .xml file
     mount: Mount = Mount()
+    ee_body: str | None = None
+    ee_offset: tuple[float, float, float] | None = None
+    root: str | None = None
+    home: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def is_file(self) -> bool:
+        """Whether this arm is a user's file rather than a named wheel arm."""
+        return self.urdf not in URDF_ARMS
+
+    @property
+    def name(self) -> str:
+        """The arm's short name: the named arm's, or the file's stem (`my_arm` for my_arm.urdf)."""
+        return pathlib.Path(self.urdf).stem if self.is_file else self.urdf
+
+    def read(self) -> arm_file.ArmFile:
+        """The arm's file read and checked (cached per file); `DpcError` if it cannot be used."""
+        if not self.is_file:
+            info = URDF_ARMS[self.urdf]
+            return arm_file.read(
+                assets.urdf_path(self.urdf),
+                root=self.root or info.root,
+                ee_body=self.ee_body or info.ee_body,
+                drop_links=info.drop,
+                keep_meshes=False,
+            )
+        return arm_file.read(self.urdf, root=self.root, ee_body=self.ee_body)
+
+    def home_pose(self) -> dict[str, float]:
+        """Home value (rad, m) per joint of the arm (names without the attach prefix)."""
+        read = self.read()
+        home = arm_file.default_home(read)
+        if not self.is_file:
+            for name, q in URDF_ARMS[self.urdf].home.items():
+                home[name] = float(np.clip(q, *arm_file.inside(read.joints[name])))
+        return {**home, **dict(self.home)}
+
+    @property
+    def offset(self) -> tuple[float, float, float]:
+        """ee_offset, or the named arm's (m, in ee_body's frame; a file's default is 0)."""
+        if self.ee_offset is not None:
+            return self.ee_offset
+        return (0.0, 0.0, 0.0) if self.is_file else URDF_ARMS[self.urdf].ee_offset
 
     def validate(self, what: str = "arm") -> None:
-        if self.urdf not in URDF_ARMS:
-            raise DpcError(f"{what}: unknown URDF arm {self.urdf!r}; known: {sorted(URDF_ARMS)}.")
+        if self.is_file and pathlib.Path(self.urdf).suffix.lower() not in arm_file.SUFFIXES:
+            raise DpcError(
+                f"{what}: unknown URDF arm {self.urdf!r}; known: {sorted(URDF_ARMS)}, or give the "
+                "path of a .urdf or MJCF .xml file."
+            )
+        offset = self.offset
+        if len(offset) != 3 or not all(math.isfinite(float(v)) for v in offset):
+            raise DpcError(f"{what}: ee_offset must be 3 finite numbers (m), got {offset!r}.")
+        names = [pair[0] for pair in self.home]
+        if len(set(names)) != len(names) or not all(len(pair) == 2 for pair in self.home):
+            raise DpcError(
+                f"{what}: home must be (joint, value) pairs, each joint once: {self.home}"
+            )
+        arm_file.check_home(self.read(), dict(self.home), what)
         self.mount.validate(f"{what}.mount")
 
 
@@ -189,19 +255,11 @@ def arm_spec(arm: ArmSpec | UrdfArm) -> mujoco.MjSpec:
     return _urdf_arm_spec(arm)
 
 
-def home_qpos(arm: ArmSpec | UrdfArm, model: mujoco.MjModel, prefix: str) -> dict[str, float]:
-    """Home joint angle (rad or m) per joint name of an attached arm."""
+def home_qpos(arm: ArmSpec | UrdfArm, prefix: str) -> dict[str, float]:
+    """Home joint value (rad or m) per joint name of an attached arm (names with `prefix`)."""
     if isinstance(arm, ArmSpec):
         return {prefix + name: 0.0 for name in arm.joints}
-    info = URDF_ARMS[arm.urdf]
-    home = {}
-    for j in range(model.njnt):
-        name = model.joint(j).name
-        if name.startswith(prefix):
-            lo, hi = model.jnt_range[j]
-            q = info.home.get(name.removeprefix(prefix), 0.0)
-            home[name] = float(np.clip(q, lo + 0.05, hi - 0.05)) if model.jnt_limited[j] else q
-    return home
+    return {prefix + name: q for name, q in arm.home_pose().items()}
 
 
 def _add_mount_sensors(spec: mujoco.MjSpec, root: mujoco.MjsBody) -> None:
@@ -367,23 +425,26 @@ def _add_plate(gripper: mujoco.MjsBody, mass: float, rgba: list) -> None:
 
 
 def _urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
-    info = URDF_ARMS[arm.urdf]
-    spec = load_urdf(arm.urdf, drop_links=info.drop)
-    spec.modelname = arm.urdf
-    root = spec.body(info.root)
+    read = arm.read()
+    spec = read.spec
+    spec.modelname = arm.name
+    root = spec.body(read.root)
     root.fuse = 0  # keep the root body apart from the trunk: the mount sensors live in it
     _add_mount_sensors(spec, root)
-    spec.body(info.ee_body).add_site(
-        name=EE_SITE, pos=list(info.ee_offset), size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES
+    spec.body(read.ee_body).add_site(
+        name=EE_SITE, pos=list(arm.offset), size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES
     )
-    # Capsules between successive joint origins, so the arm is visible without its meshes.
-    for body in spec.bodies:
-        if body.name in ("world", info.root):
-            continue
-        if np.linalg.norm(body.pos) > 1e-3:
-            body.parent.add_geom(
-                type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[0.012, 0, 0], fromto=[0, 0, 0, *body.pos]
-            )
+    if not arm.is_file or not read.has_geometry:
+        # Capsules between successive joint origins, so the arm is visible without its meshes.
+        for body in spec.bodies:
+            if body.name in ("world", read.root):
+                continue
+            if np.linalg.norm(body.pos) > 1e-3:
+                body.parent.add_geom(
+                    type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                    size=[0.012, 0, 0],
+                    fromto=[0, 0, 0, *body.pos],
+                )
     for joint in spec.joints:
         joint.armature = ARM_ARMATURE
         joint.damping = [max(joint.damping[0], ARM_DAMPING), 0, 0]

@@ -25,7 +25,12 @@ def arm_prefix(i: int) -> str:
 
 def robot_spec(robot: str | Arm | RobotSpec) -> mujoco.MjSpec:
     """The robot alone (no floor): A1, arms attached at their mounts, options, home keyframe."""
-    robot = resolve(robot)
+    return assemble(resolve(robot))
+
+
+def assemble(robot: RobotSpec) -> mujoco.MjSpec:
+    """`robot_spec` of a robot already resolved (not validated again: `resolve` checks a file
+    arm's static balance on this spec)."""
     spec = a1.a1_spec()
     spec.modelname = f"a1_{robot.name}"
     trunk = spec.body(a1.TRUNK)
@@ -105,7 +110,7 @@ def _home(robot: RobotSpec, model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarr
     """Home qpos (nq,) and ctrl (nu,): standing legs, arms in their home pose as servo targets."""
     joint_q = dict(zip(a1.LEG_JOINTS, a1.home_leg_qpos(), strict=True))
     for i, arm in enumerate(robot.arms):
-        joint_q.update(arms.home_qpos(arm, model, arm_prefix(i)))
+        joint_q.update(arms.home_qpos(arm, arm_prefix(i)))
     qpos = model.qpos0.copy()
     qpos[:7] = [0, 0, a1.HOME_HEIGHT, 1, 0, 0, 0]
     for name, q in joint_q.items():

@@ -4,11 +4,14 @@ its fields tagged with `"type"`. Reading builds only these dataclasses, never ar
 from __future__ import annotations
 
 import dataclasses
+import json
+import pathlib
 from typing import Any
 
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots.arm_file import SUFFIXES
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
-from dpc_mjx.robots.variants import RobotSpec, resolve
+from dpc_mjx.robots.variants import VARIANTS, RobotSpec, resolve
 
 ArmLike = str | ArmSpec | UrdfArm | RobotSpec
 _FIX = "re-export the artefacts with dpc_mjx.io.export"
@@ -62,3 +65,68 @@ def _dataclass_from_json(obj: Any) -> Any:
             f"dpc_mjx?); {_FIX}."
         )
     return cls(**fields)
+
+
+# Keys of a user's arm description (a JSON object): UrdfArm's fields, `mount` as {"pos", "yaw"}
+# and `home` as {joint: value}.
+DESCRIPTION_KEYS = ("urdf", "mount", "ee_body", "ee_offset", "root", "home")
+
+
+def arm_argument(text: str) -> str | UrdfArm:
+    """What `--arm` / `--arms` name: a variant (`regular`), an arm file (`my_arm.urdf`, `.xml`) or
+    an arm description (`my_arm.json`, see `read_arm_description`); checked (`robots.resolve`)."""
+    if text in VARIANTS:
+        return text
+    suffix = pathlib.Path(text).suffix.lower()
+    if suffix == ".json":
+        arm = read_arm_description(text)
+    elif suffix in SUFFIXES:
+        arm = UrdfArm(str(pathlib.Path(text).expanduser().resolve()))
+    else:
+        raise DpcError(
+            f"Unknown arm {text!r}: not a variant ({sorted(VARIANTS)}) nor an arm file (.urdf, "
+            "MJCF .xml) or arm description (.json)."
+        )
+    resolve(arm)
+    return arm
+
+
+def read_arm_description(path: str | pathlib.Path) -> UrdfArm:
+    """An arm description: a JSON object such as
+
+        {"urdf": "my_arm.urdf", "ee_body": "link6", "ee_offset": [0, 0, 0.05],
+         "mount": {"pos": [0.09, 0, 0.057], "yaw": 0}, "home": {"joint2": 0.5}, "root": "base"}
+
+    where only "urdf" (a path relative to the JSON file, or absolute; URDF or MJCF) is needed; the
+    others default as in `UrdfArm`."""
+    p = pathlib.Path(path).expanduser()
+    if not p.is_file():
+        raise DpcError(f"Arm description {str(path)!r} does not exist; give the path of its JSON.")
+    try:
+        d = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DpcError(f"Arm description {p} is not valid JSON ({e}); fix the file.") from e
+    if not isinstance(d, dict) or "urdf" not in d or set(d) - set(DESCRIPTION_KEYS):
+        raise DpcError(
+            f'Arm description {p}: expected a JSON object with "urdf" (the arm file) and any '
+            f"of {list(DESCRIPTION_KEYS[1:])}; got keys {sorted(d) if isinstance(d, dict) else d}."
+        )
+    try:
+        mount = d.get("mount", {})
+        home = d.get("home", {})
+        offset = d.get("ee_offset")
+        return UrdfArm(
+            urdf=str((p.parent / d["urdf"]).resolve()),
+            mount=Mount(
+                tuple(float(v) for v in mount.get("pos", Mount().pos)), float(mount.get("yaw", 0.0))
+            ),
+            ee_body=d.get("ee_body"),
+            ee_offset=None if offset is None else tuple(float(v) for v in offset),
+            root=d.get("root"),
+            home=tuple((str(k), float(v)) for k, v in home.items()),
+        )
+    except (AttributeError, TypeError, ValueError) as e:
+        raise DpcError(
+            f'Arm description {p}: {e}; "mount" is {{"pos": [x, y, z], "yaw": rad}}, '
+            '"home" is {joint: value}, "ee_offset" is [x, y, z] (m).'
+        ) from e

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import pathlib
 
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import a1
@@ -93,4 +94,20 @@ def resolve(robot: str | Arm | RobotSpec) -> RobotSpec:
             f"got {type(robot).__name__}."
         )
     spec.validate()
+    files = [arm for arm in spec.arms if isinstance(arm, UrdfArm) and arm.is_file]
+    if files:
+        from dpc_mjx.robots.static_balance import require_static_balance  # noqa: PLC0415
+
+        stamps = tuple(pathlib.Path(arm.urdf).stat().st_mtime_ns for arm in files)
+        require_static_balance(spec, stamps)
     return spec
+
+
+def arm_name(robot: str | Arm | RobotSpec) -> str:
+    """The name an arm goes by in tables and exports: a variant's name, a file arm's file stem
+    (`my_arm` for my_arm.urdf), a named URDF arm's name, a RobotSpec's name; "custom" otherwise."""
+    if isinstance(robot, str):
+        return robot
+    if isinstance(robot, UrdfArm):
+        return robot.name
+    return robot.name if isinstance(robot, RobotSpec) else "custom"

@@ -5,6 +5,7 @@
                                        (`--recipe paper`: SAC from a random actor)
     dpc-mjx train-adapter --run runs/x only the adapter stage (continue with train --resume)
     dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
+                                       (--arm my_arm.urdf, .xml or .json: your own arm)
     dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
@@ -173,7 +174,12 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("transfer", help="train a new arm's encoder against a frozen decoder")
     p.add_argument("--export", required=True, help="an export folder (run/export)")
-    p.add_argument("--arm", required=True, help="the new arm variant, e.g. so100")
+    p.add_argument(
+        "--arm",
+        required=True,
+        help="the new arm: a variant (so100), your arm's .urdf or MJCF .xml file, or a .json arm "
+        "description (README: Your own arm)",
+    )
     p.add_argument("--samples", type=int, default=30_000)
     p.add_argument("--task", default="a1_arm/reaching")
     p.add_argument("--seed", type=int, default=0)
@@ -183,7 +189,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--export", help="an export folder (default: the shipped dpc_mjx/artefacts/regular)"
     )
-    p.add_argument("--arms", nargs="+", help="arms (default: every arm with an encoder)")
+    p.add_argument(
+        "--arms",
+        nargs="+",
+        help="arms: encoder names, variants, arm files or descriptions (default: every arm with "
+        "an encoder)",
+    )
     p.add_argument(
         "--controllers",
         nargs="+",

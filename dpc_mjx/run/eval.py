@@ -27,6 +27,7 @@ import numpy as np
 from dpc_mjx.envs.registry import make
 from dpc_mjx.envs.rollout import Policy, run_episodes
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 
 CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
@@ -109,7 +110,7 @@ def evaluate_env(
 
 
 def evaluate(
-    arms: list[str],
+    arms: list[str | Arm],
     controllers: list[str],
     *,
     task: str = "a1_arm/reaching",
@@ -121,8 +122,9 @@ def evaluate(
     on_result: Callable[[CellResult], None] | None = None,
     progress: bool = True,
 ) -> list[CellResult]:
-    """Every (arm, controller) cell of the protocol on `task`; `dpc_policy_for(arm)` gives the
-    DPC policy of an arm (its encoder + the shared actor), needed when 'dpc' is asked for."""
+    """Every (arm, controller) cell of the protocol on `task`; an arm is a variant name or an arm
+    (`robots.UrdfArm`, ...), its cells labelled `robots.arm_name(arm)`; `dpc_policy_for(name)`
+    gives the DPC policy of an arm (its encoder + the shared actor), needed for 'dpc'."""
     unknown = sorted(set(controllers) - set(CONTROLLERS))
     if unknown:
         raise DpcError(f"Unknown controller(s) {unknown}; choose from {list(CONTROLLERS)}.")
@@ -132,12 +134,13 @@ def evaluate(
         raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
     results = []
     for arm in arms:
-        policy_for_arm = dpc_policy_for(arm) if "dpc" in controllers else None
+        name = arm_name(arm)
+        policy_for_arm = dpc_policy_for(name) if "dpc" in controllers else None
         for controller in controllers:
             env_controller = "policy" if controller == "dpc" else controller
             env = make(task, arm=arm, controller=env_controller, **(overrides or {}))
             policy = policy_for_arm if controller == "dpc" else None
-            cell = evaluate_env(env, arm, controller, episodes, steps, seed, policy, progress)
+            cell = evaluate_env(env, name, controller, episodes, steps, seed, policy, progress)
             results.append(cell)
             if on_result is not None:
                 on_result(cell)

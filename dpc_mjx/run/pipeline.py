@@ -29,6 +29,8 @@ from dpc_mjx import io, sac
 from dpc_mjx.adapter import checkpoint as adapter_checkpoint
 from dpc_mjx.envs.registry import get_config, make
 from dpc_mjx.io.serialization import write_json
+from dpc_mjx.robots.spec_json import arm_argument
+from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run import plots
 from dpc_mjx.run.config import RunConfig, read_run_config, start_run, tuples
 from dpc_mjx.run.eval import (
@@ -311,18 +313,23 @@ def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = Non
     return export(config, run_dir, adapter, result, out)
 
 
-def env_overrides(artefacts: io.Artefacts) -> dict:
+def env_overrides(artefacts: io.Artefacts, task: str | None = None) -> dict:
     """The env options an export was trained with (its sidecar's env_config), to evaluate and
-    transfer under the same disturbances; the controller is chosen per use. An export written
-    before `EnvConfig.u_frame` and the sensor model existed acted in the world frame and was
-    trained with exact sensors."""
+    transfer under the same disturbances; the controller is chosen per use. On another `task`
+    than the export's, only the policy's frame and the sensor model carry over (the task brings
+    its own disturbances). An export written before `EnvConfig.u_frame` and the sensor model
+    existed acted in the world frame and was trained with exact sensors."""
     saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
-    return tuples({k: v for k, v in saved.items() if k != "controller"})
+    saved = tuples({k: v for k, v in saved.items() if k != "controller"})
+    trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
+    if task is not None and task != trained_on:
+        return {k: saved[k] for k in _POLICY_ENV_BEFORE}
+    return saved
 
 
 def transfer_arm(
     export_dir: str | pathlib.Path,
-    arm: str,
+    arm: str | Arm,
     *,
     samples: int = 30_000,
     task: str = "a1_arm/reaching",
@@ -331,17 +338,22 @@ def transfer_arm(
     progress: bool = True,
 ) -> dict:
     """Paper §III-C: collect `samples` random-motion transitions of a new `arm` (MBC), train its
-    encoder against the export's frozen decoder, and add it to the export. Returns the
-    encoder's training history."""
+    encoder against the export's frozen decoder, and add it to the export under the arm's name
+    (`robots.arm_name`: `my_arm` for my_arm.urdf). `arm`: a variant name, the path of an arm file
+    (.urdf, MJCF .xml) or description (.json; `robots.read_arm_description`), a `UrdfArm` or an
+    `ArmSpec`. Returns the encoder's training history."""
+    if isinstance(arm, str):
+        arm = arm_argument(arm)
+    name = arm_name(arm)
     artefacts = io.load(export_dir)
-    env = make(task, arm=arm, controller="mbc", **env_overrides(artefacts))
-    print(f"transfer: collecting {samples:,} samples ({arm}, MBC)", flush=True)
+    env = make(task, arm=arm, controller="mbc", **env_overrides(artefacts, task))
+    print(f"transfer: collecting {samples:,} samples ({name}, MBC)", flush=True)
     data = adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress)
     config = dataclasses.replace(artefacts.adapter_config, seed=seed)
     encoder, history = adapter_lib.transfer(data, artefacts.decoder, config, progress=progress)
-    io.add_encoder(export_dir, arm, encoder, arm, replace=True)
+    io.add_encoder(export_dir, name, encoder, arm, replace=True)
     print(
-        f"transfer: {arm} encoder from {len(data):,} samples ({data.env_steps:,} env steps, "
+        f"transfer: {name} encoder from {len(data):,} samples ({data.env_steps:,} env steps, "
         f"{data.seconds:.0f} s) trained in {history['seconds']:.0f} s; held-out NLL "
         f"{min(history['val_nll']):.3f} (constant predictor {history['constant_val_nll']:.3f}); "
         f"added to {export_dir}",
@@ -363,20 +375,19 @@ def evaluate_export(
     csv: str | pathlib.Path | None = None,
     env: dict | None = None,
 ) -> list[CellResult]:
-    """The evaluation protocol for the arms of an export (default: every arm with an encoder),
+    """The evaluation protocol for the arms of an export (default: every arm with an encoder; an
+    arm is an encoder's name, a variant, or an arm file or description as for `transfer_arm`),
     under the env options it was trained with and `env` over them (e.g. exact sensors); prints
     the table (and writes it to `out`, and one row per episode to `csv`)."""
     artefacts = io.load(export_dir)
-    arms = list(arms or sorted(artefacts.encoders))
+    arms = [
+        artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
+        for arm in (arms or sorted(artefacts.encoders))
+    ]
     if "dpc" in controllers:
         for arm in arms:
-            artefacts.encoder(arm)  # a missing encoder fails before any compile
-    trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
-    # the training task's disturbances; another task brings its own (the policy's frame and
-    # sensors stay)
-    saved = env_overrides(artefacts)
-    overrides = saved if task == trained_on else {k: saved[k] for k in _POLICY_ENV_BEFORE}
-    overrides = {**overrides, **(env or {})}
+            artefacts.encoder(arm_name(arm))  # a missing encoder fails before any compile
+    overrides = {**env_overrides(artefacts, task), **(env or {})}
     return _evaluate_table(
         arms,
         list(controllers),

@@ -75,3 +75,67 @@ def posture_prediction(t, real, mean, std, path) -> pathlib.Path:
     axes[0].set_title("next-step roll and pitch rate: real vs adapter prediction")
     axes[1].set_xlabel("time (s)")
     return _save(fig, path)
+
+
+def lifting_trajectory(runs: dict[str, dict], dt: float, path) -> pathlib.Path:
+    """The paper's lifting figure. `runs[label]` holds (steps + 1, episodes, ...) arrays: 'pos'
+    and 'desired' (m, world x y), 'error' (m) and 'standing' (bool). Left: episode 0's path per
+    controller against the desired one (a cross where it fell); right: the mean distance from
+    the desired position over the episodes still standing, and the fraction standing."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
+    first = next(iter(runs.values()))
+    a.plot(*first["desired"][:, 0].T, "k--", lw=1.5, label="desired")
+    t = np.arange(first["error"].shape[0]) * dt
+    twin = b.twinx()
+    for i, (label, r) in enumerate(runs.items()):
+        color = f"C{i}"
+        up = r["standing"][:, 0]
+        a.plot(*r["pos"][up, 0].T, color=color, label=label)
+        if not up[-1]:
+            a.plot(*r["pos"][np.argmin(up), 0], "x", color=color, ms=10, mew=2)
+        n = r["standing"].sum(1)
+        mean = np.where(n > 0, (r["error"] * r["standing"]).sum(1) / np.maximum(n, 1), np.nan)
+        b.plot(t, mean, color=color, label=f"{label}: distance from desired")
+        twin.plot(t, n / r["standing"].shape[1], ":", color=color, label=f"{label}: standing")
+    a.set_xlabel("x (m)")
+    a.set_ylabel("y (m)")
+    a.set_aspect("equal", adjustable="datalim")
+    a.set_title("episode 0: body path")
+    a.legend()
+    a.grid(alpha=0.3)
+    b.set_xlabel("time (s)")
+    b.set_ylabel("mean distance from the desired position (m)")
+    twin.set_ylabel("fraction of episodes standing")
+    twin.set_ylim(0, 1.05)
+    b.set_title(f"{first['error'].shape[1]} episodes")
+    lines = b.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
+    b.legend(lines, [h.get_label() for h in lines], fontsize=8, loc="upper left")
+    b.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def latent_by_arm(per_arm: dict[str, tuple[np.ndarray, np.ndarray]], path) -> pathlib.Path:
+    """The paper's latent figure. `per_arm[name] = (z (N, 2), s_drp_next (N, 2) rad/s)`: one
+    column per arm, z_0 against z_1 coloured by the next roll rate (top row) and pitch rate
+    (bottom row), one colour scale per row shared by every arm."""
+    n = len(per_arm)
+    fig, axes = plt.subplots(2, n, figsize=(2.9 * n + 1, 5.6), squeeze=False)
+    for row, label in enumerate(("next roll rate (rad/s)", "next pitch rate (rad/s)")):
+        values = np.concatenate([rates[:, row] for _, rates in per_arm.values()])
+        lim = np.percentile(np.abs(values), 98)
+        for col, (name, (z, rates)) in enumerate(per_arm.items()):
+            ax = axes[row, col]
+            art = ax.scatter(
+                z[:, 0], z[:, 1], c=rates[:, row], s=2, cmap="coolwarm", vmin=-lim, vmax=lim
+            )
+            ax.set_title(name if row == 0 else "")
+            ax.set_xlabel("z_0")
+            if col == 0:
+                ax.set_ylabel("z_1")
+            ax.grid(alpha=0.3)
+        fig.colorbar(art, ax=axes[row, :].tolist(), label=label, shrink=0.9)
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
