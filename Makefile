@@ -5,19 +5,29 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-test
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: install demo test test-all bench mjcf lint clean
+.PHONY: install render-deps demo test test-all bench mjcf lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ".[test]"
+	$(BIN)/python -m pip install -q -e ".[test,render]"
 	touch $(STAMP)
 
 $(BENCH_STAMP): $(STAMP)
-	$(BIN)/python -m pip install -q -e ".[test,bench]"
+	$(BIN)/python -m pip install -q -e ".[test,render,bench]"
 	touch $(BENCH_STAMP)
 
-install: $(STAMP)
+install: $(STAMP) render-deps
+
+# Headless rendering (dpc-mjx render; a test renders a clip) needs OSMesa, Debian's libosmesa6:
+# installed here when it is missing and we are root with apt-get, else we say what to install.
+render-deps:
+	@if ldconfig -p | grep -q libOSMesa; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  echo "installing libosmesa6 (headless rendering)"; \
+	  apt-get install -y -q libosmesa6 >/dev/null 2>&1 || \
+	  (apt-get update -q >/dev/null 2>&1 && apt-get install -y -q libosmesa6 >/dev/null 2>&1); \
+	else echo "dpc-mjx render needs OSMesa: sudo apt-get install libosmesa6 (Debian/Ubuntu)"; fi
 
 # The main job on a small default (see README).
 demo: $(STAMP)
@@ -27,12 +37,12 @@ demo: $(STAMP)
 # compilation cache in .cache/jax (tests/conftest.py) serves repeated compiles.
 PYTEST := $(BIN)/python -m pytest -q -n 2 --dist loadfile
 
-test: $(STAMP)
+test: $(STAMP) render-deps
 	$(PYTEST)
 
 # Also the tests marked slow: every task x every arm (tests/test_matrix.py) and the paper's
 # alternate arms stepped in tests/test_tasks.py (about half an hour on 2 cores).
-test-all: $(STAMP)
+test-all: $(STAMP) render-deps
 	$(PYTEST) -m "slow or not slow"
 
 bench: $(BENCH_STAMP)

@@ -8,6 +8,7 @@
                                        (--arm my_arm.urdf, .xml or .json: your own arm)
     dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
+    dpc-mjx render --out clip.mp4      a video of an episode (--compare mbc dpc: side by side)
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
     dpc-mjx variants                   every arm variant built and stood in MJX
     dpc-mjx mjcf                       write every variant's MJCF into mjcf/
@@ -93,6 +94,23 @@ def _eval(args: argparse.Namespace) -> None:
         out=args.out,
         csv=args.csv or _default_csv(args),
         env=_parse_sets(args.env),
+    )
+
+
+def _render(args: argparse.Namespace) -> None:
+    from dpc_mjx.run.render import render_rollout
+
+    render_rollout(
+        args.out,
+        task=args.task,
+        arm=args.arm,
+        controllers=tuple(args.compare or [args.controller]),
+        export=args.export,
+        seconds=args.seconds,
+        seed=args.seed,
+        episode=args.episode,
+        width=args.width,
+        height=args.height,
     )
 
 
@@ -229,6 +247,22 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--batches", type=int, nargs="+", default=[1, 64, 256])
     p.add_argument("--calls", type=int, default=20)
     p.set_defaults(handler=_bench)
+
+    p = sub.add_parser("render", help="a video (MP4 or GIF) of an episode, headless")
+    p.add_argument("--out", required=True, help="clip.mp4 or clip.gif")
+    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--arm", default="regular", help="a variant, an arm file or description")
+    p.add_argument("--controller", default="mbc", help="mbc, observer, dpc or oracle")
+    p.add_argument(
+        "--compare", nargs="+", help="several controllers side by side on the same episode"
+    )
+    p.add_argument("--export", help="for dpc and the env options (default: the shipped export)")
+    p.add_argument("--seconds", type=float, default=2.0)
+    p.add_argument("--seed", type=int, default=0, help="as dpc-mjx eval --seed")
+    p.add_argument("--episode", type=int, default=0, help="episode index within the seed")
+    p.add_argument("--width", type=int, default=480)
+    p.add_argument("--height", type=int, default=360)
+    p.set_defaults(handler=_render)
 
     p = sub.add_parser("variants", help="build every arm variant and stand a batch of each")
     p.add_argument("--variants", nargs="*", help="variant names (default: all)")
