@@ -1,6 +1,7 @@
 """Helpers shared by the test modules (pytest puts this folder on the import path)."""
 
 import contextlib
+import functools
 
 import jax
 from brax.envs.base import Wrapper
@@ -8,6 +9,18 @@ from brax.envs.base import Wrapper
 # XLA's backend optimisation off: compiles ~40% shorter, steps ~10x slower. For tests that compile
 # a program to take a handful of steps (compile time dominates the test run), never for timing.
 FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+
+_JIT = jax.jit
+
+
+def fast_jit(fun=None, **kwargs):
+    """`jax.jit` with FAST_COMPILE unless told otherwise: monkeypatched over `jax.jit` by tests
+    that run a library entry point (transfer, evaluation, render) for a few steps."""
+    kwargs.setdefault("compiler_options", FAST_COMPILE)
+    if fun is None:
+        return functools.partial(fast_jit, **kwargs)
+    return _JIT(fun, **kwargs)
 
 
 class CountTraces(Wrapper):

@@ -75,7 +75,10 @@ def test_oracle_holds_level_under_a_known_wrench_while_mbc_tilts(standing):
     assert np.all(np.abs(pitch_mbc) > 2 * np.abs(pitch_oracle).max() + 0.02), pitch_mbc
 
 
-@pytest.mark.parametrize("variant", ["none", "regular"])
+@pytest.mark.parametrize(
+    "variant",
+    [pytest.param("none", marks=pytest.mark.slow), "regular"],  # breadth: test-all
+)
 def test_trot_tracks_forward_speed_and_yaw_rate(variant):
     model = build(variant)
     controller = make_controller(model, gait_=gait.trot())

@@ -70,16 +70,28 @@ def _evaluate_shipped(csv_path=None, controllers=None):
     )
 
 
+# The default run checks MBC and DPC (the policy's whole path); the observer and the oracle, one
+# compile each, are checked by the slow test below (`make test-all`).
+DEFAULT_CONTROLLERS = ("mbc", "dpc")
+
+
 @pytest.fixture(scope="module")
 def evaluated(tmp_path_factory):
     path = tmp_path_factory.mktemp("eval") / "episodes.csv"
-    recording = _recording(SHIPPED_RECORDING)
+    recording = {c: _recording(SHIPPED_RECORDING)[c] for c in DEFAULT_CONTROLLERS}
     return _evaluate_shipped(path, list(recording)), recording, path
 
 
 def test_shipped_export_evaluates_as_recorded(evaluated):
     cells, recording, _ = evaluated
     _assert_as_recorded(cells, recording)
+
+
+@pytest.mark.slow
+def test_shipped_export_evaluates_as_recorded_under_the_observer_and_the_oracle():
+    recording = _recording(SHIPPED_RECORDING)
+    others = {c: r for c, r in recording.items() if c not in DEFAULT_CONTROLLERS}
+    _assert_as_recorded(_evaluate_shipped(controllers=list(others)), others)
 
 
 def test_exact_sensors_evaluate_as_the_envs_before_the_sensor_model():

@@ -28,7 +28,15 @@ _BATCHED_CALLS = 6  # x 50 steps = 1.2 s
 _G = 9.81
 
 
-@pytest.fixture(scope="module", params=sorted(VARIANTS))
+_BREADTH = ("none", "longer", "heavier")  # regular's structure, or stepped in test_envs: test-all
+
+
+@pytest.fixture(
+    scope="module",
+    params=[
+        pytest.param(v, marks=pytest.mark.slow) if v in _BREADTH else v for v in sorted(VARIANTS)
+    ],
+)
 def standing_run(request):
     """Per variant: batched MJX states after one chunk and after 2 s of standing on servos."""
     model = with_leg_servos(build(request.param))

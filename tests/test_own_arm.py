@@ -6,9 +6,11 @@ import shutil
 import struct
 import warnings
 
+import jax
 import mujoco
 import numpy as np
 import pytest
+from helpers import fast_jit
 
 from dpc_mjx import DpcError, io
 from dpc_mjx.robots import (
@@ -280,7 +282,8 @@ def test_arm_arguments_take_variants_files_and_descriptions(urdf, tmp_path):
         arm_argument(str(description))
 
 
-def test_a_new_urdf_arm_goes_through_transfer_and_evaluation(urdf, tmp_path, capsys):
+def test_a_new_urdf_arm_goes_through_transfer_and_evaluation(monkeypatch, urdf, tmp_path, capsys):
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: a few steps of each program
     """The whole path a user takes: `dpc-mjx transfer --arm my_arm.urdf` (MJX data collection,
     an encoder against the frozen decoder) then `dpc-mjx eval --arms my_arm.urdf`."""
     export = tmp_path / "export"

@@ -1,8 +1,10 @@
 """Videos: `dpc-mjx render` writes a playable MP4 headless (OSMesa on a CPU-only machine)."""
 
 import imageio_ffmpeg
+import jax
 import numpy as np
 import pytest
+from helpers import fast_jit
 from PIL import Image
 
 from dpc_mjx import DpcError
@@ -12,7 +14,8 @@ from dpc_mjx.run.render import FPS, gl_context, write_video
 _SECONDS, _W, _H = 0.2, 160, 120
 
 
-def test_render_writes_a_playable_mp4_of_the_episode(tmp_path, capsys):
+def test_render_writes_a_playable_mp4_of_the_episode(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: a few steps of each program
     out = tmp_path / "clip.mp4"
     args = ["render", "--out", str(out), "--seconds", str(_SECONDS), "--width", str(_W)]
     assert cli.main([*args, "--height", str(_H), "--controller", "mbc"]) == 0
