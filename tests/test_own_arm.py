@@ -270,7 +270,7 @@ def test_arm_arguments_take_variants_files_and_descriptions(urdf, tmp_path):
         }))  # fmt: skip
         arm = arm_argument(str(description))
     assert arm == UrdfArm(
-        str(urdf), Mount((0.05, 0, 0.057), 0.3), "link2", (0, 0, 0.1), None, (("j2", 0.2),)
+        str(urdf), Mount((0.05, 0, 0.057), 0.3), "link2", (0, 0, 0.1), (("j2", 0.2),)
     )
     with pytest.raises(DpcError, match="Unknown arm 'arm7': not a variant"):
         arm_argument("arm7")

@@ -3,7 +3,7 @@
 What the library needs of the file: one tree of links (bodies) whose root we weld to the A1's
 trunk, at least one movable joint (URDF revolute, continuous or prismatic; MJCF hinge or slide), a
 mass and an inertia on every link that moves, and the mesh files its geometry names. What it
-infers when not told (`UrdfArm.root`, `.ee_body`, `.home`):
+infers (the end effector and home pose only when not told: `UrdfArm.ee_body`, `.home`):
 
 - the root: the URDF's root link, skipping massless links welded on by a fixed joint (a `world`
   or `base_footprint` link); the MJCF's one top-level body;
@@ -79,7 +79,6 @@ def check_path(path: str | os.PathLike) -> tuple[pathlib.Path, str]:
 def read(
     path: str | os.PathLike,
     *,
-    root: str | None = None,
     ee_body: str | None = None,
     drop_links: tuple[str, ...] = (),
     keep_meshes: bool = True,
@@ -90,12 +89,12 @@ def read(
     library's wheel arms, whose meshes are COLLADA).
     """
     p, kind = check_path(path)
-    cached = _read_cached(p, p.stat().st_mtime_ns, kind, root, ee_body, drop_links, keep_meshes)
+    cached = _read_cached(p, p.stat().st_mtime_ns, kind, ee_body, drop_links, keep_meshes)
     return dataclasses.replace(cached, spec=cached.spec.copy())  # the caller may edit its spec
 
 
 @functools.lru_cache(maxsize=32)
-def _read_cached(p, _mtime, kind, root, ee_body, drop_links, keep_meshes) -> ArmFile:
+def _read_cached(p, _mtime, kind, ee_body, drop_links, keep_meshes) -> ArmFile:
     try:
         tree = ET.parse(p).getroot()
     except ET.ParseError as e:
@@ -107,9 +106,9 @@ def _read_cached(p, _mtime, kind, root, ee_body, drop_links, keep_meshes) -> Arm
             f"<{tree.tag}>; give a URDF (.urdf, <robot>) or an MJCF (.xml, <mujoco>) file."
         )
     if kind == "urdf":
-        xml, file_root, dropped, has_geometry = _prepare_urdf(p, tree, drop_links, keep_meshes)
+        xml, root, dropped, has_geometry = _prepare_urdf(p, tree, drop_links, keep_meshes)
     else:
-        xml, file_root, dropped, has_geometry = _prepare_mjcf(p, tree, keep_meshes)
+        xml, root, dropped, has_geometry = _prepare_mjcf(p, tree, keep_meshes)
     for name in dropped:
         warnings.warn(
             f"{p}: mesh {name} is in a format MuJoCo cannot read (it reads {MESH_FORMATS}); "
@@ -121,8 +120,6 @@ def _read_cached(p, _mtime, kind, root, ee_body, drop_links, keep_meshes) -> Arm
         model = spec.compile()
     except ValueError as e:
         raise DpcError(f"MuJoCo cannot read the arm file {p}: {e}. Fix the file.") from e
-    root = root or file_root
-    _body_or_error(model, root, "root", p)
     joints = _movable_joints(model, p)
     _check_inertia(model, p)
     ee_body = ee_body or _chain_end(model, root)

@@ -160,17 +160,16 @@ class UrdfArm:
     of the example-robot-data wheel) or the path of your own URDF or MJCF file
     (`dpc_mjx.robots.arm_file` says what the file needs and what is inferred).
 
-    root: the body welded to the trunk; ee_body and ee_offset (m, in ee_body's frame): where the
-    end effector is; home: (joint, value) pairs of the home pose (rad, m for a slide), joints not
-    named at 0 (clipped into their range). None or () takes the named arm's values, or for a file
-    what `arm_file` infers.
+    ee_body and ee_offset (m, in ee_body's frame): where the end effector is; home: (joint, value)
+    pairs of the home pose (rad, m for a slide), joints not named at 0 (clipped into their range).
+    None or () takes the named arm's values, or for a file what `arm_file` infers. The body welded
+    to the trunk is always inferred (the file's root link).
     """
 
     urdf: str  # a name of URDF_ARMS, or the path of a .urdf or MJCF .xml file
     mount: Mount = Mount()
     ee_body: str | None = None
     ee_offset: tuple[float, float, float] | None = None
-    root: str | None = None
     home: tuple[tuple[str, float], ...] = ()
 
     @property
@@ -189,12 +188,11 @@ class UrdfArm:
             info = URDF_ARMS[self.urdf]
             return arm_file.read(
                 assets.urdf_path(self.urdf),
-                root=self.root or info.root,
                 ee_body=self.ee_body or info.ee_body,
                 drop_links=info.drop,
                 keep_meshes=False,
             )
-        return arm_file.read(self.urdf, root=self.root, ee_body=self.ee_body)
+        return arm_file.read(self.urdf, ee_body=self.ee_body)
 
     def home_pose(self) -> dict[str, float]:
         """Home value (rad, m) per joint of the arm (names without the attach prefix)."""
@@ -232,7 +230,6 @@ class UrdfArm:
 
 @dataclasses.dataclass(frozen=True)
 class _UrdfArmInfo:
-    root: str  # root link kept as the arm base
     drop: tuple[str, ...]  # dummy links removed before loading
     ee_body: str
     ee_offset: tuple[float, float, float]  # m, in ee_body's frame
@@ -241,9 +238,9 @@ class _UrdfArmInfo:
 
 URDF_ARMS = {
     # SO-100 (5 DOF + jaw). Its URDF <limit effort=35> is far above the real servos; we cap gains.
-    "so100": _UrdfArmInfo("base", (), "gripper", (0.0, -0.09, 0.0), {"shoulder_lift": 0.3}),
+    "so100": _UrdfArmInfo((), "gripper", (0.0, -0.09, 0.0), {"shoulder_lift": 0.3}),
     # Unitree Z1 (6 DOF + gripper), folded in its URDF zero pose.
-    "z1": _UrdfArmInfo("link00", ("world",), "link06", (0.15, 0.0, 0.0), {}),
+    "z1": _UrdfArmInfo(("world",), "link06", (0.15, 0.0, 0.0), {}),
 }
 _URDF_KP_CAP = 40.0  # N·m/rad
 

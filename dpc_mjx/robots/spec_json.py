@@ -69,7 +69,7 @@ def _dataclass_from_json(obj: Any) -> Any:
 
 # Keys of a user's arm description (a JSON object): UrdfArm's fields, `mount` as {"pos", "yaw"}
 # and `home` as {joint: value}.
-DESCRIPTION_KEYS = ("urdf", "mount", "ee_body", "ee_offset", "root", "home")
+DESCRIPTION_KEYS = ("urdf", "mount", "ee_body", "ee_offset", "home")
 
 
 def arm_argument(text: str) -> str | UrdfArm:
@@ -95,7 +95,7 @@ def read_arm_description(path: str | pathlib.Path) -> UrdfArm:
     """An arm description: a JSON object such as
 
         {"urdf": "my_arm.urdf", "ee_body": "link6", "ee_offset": [0, 0, 0.05],
-         "mount": {"pos": [0.09, 0, 0.057], "yaw": 0}, "home": {"joint2": 0.5}, "root": "base"}
+         "mount": {"pos": [0.09, 0, 0.057], "yaw": 0}, "home": {"joint2": 0.5}}
 
     where only "urdf" (a path relative to the JSON file, or absolute; URDF or MJCF) is needed; the
     others default as in `UrdfArm`."""
@@ -122,7 +122,6 @@ def read_arm_description(path: str | pathlib.Path) -> UrdfArm:
             ),
             ee_body=d.get("ee_body"),
             ee_offset=None if offset is None else tuple(float(v) for v in offset),
-            root=d.get("root"),
             home=tuple((str(k), float(v)) for k, v in home.items()),
         )
     except (AttributeError, TypeError, ValueError) as e:
