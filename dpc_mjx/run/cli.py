@@ -210,8 +210,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--arms",
         nargs="+",
-        help="arms: encoder names, variants, arm files or descriptions (default: every arm with "
-        "an encoder)",
+        help="arms: encoder names, variants, arm files or descriptions (default: the arm the "
+        "policy was trained on)",
     )
     p.add_argument(
         "--controllers",

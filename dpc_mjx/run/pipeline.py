@@ -375,14 +375,15 @@ def evaluate_export(
     csv: str | pathlib.Path | None = None,
     env: dict | None = None,
 ) -> list[CellResult]:
-    """The evaluation protocol for the arms of an export (default: every arm with an encoder; an
-    arm is an encoder's name, a variant, or an arm file or description as for `transfer_arm`),
+    """The evaluation protocol for the arms of an export (default: the arm its policy was trained
+    on, its first encoder; transferred encoders are added after it; an arm is an encoder's name,
+    a variant, or an arm file or description as for `transfer_arm`),
     under the env options it was trained with and `env` over them (e.g. exact sensors); prints
     the table (and writes it to `out`, and one row per episode to `csv`)."""
     artefacts = io.load(export_dir)
     arms = [
         artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
-        for arm in (arms or sorted(artefacts.encoders))
+        for arm in (arms or list(artefacts.meta["encoders"])[:1])
     ]
     if "dpc" in controllers:
         for arm in arms:
