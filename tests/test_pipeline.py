@@ -12,6 +12,8 @@ from dpc_mjx.run.config import RunConfig, read_run_config, recipe, start_run, tu
 from dpc_mjx.run.pipeline import SHIPPED, SHIPPED_PAPER
 from dpc_mjx.sac import SacConfig
 
+TRANSFERRED = ("longer", "heavier", "double", "so100", "z1")  # docs/results.md, "Transfer"
+
 
 def test_run_config_takes_dotted_overrides_and_round_trips_through_json(tmp_path):
     config = RunConfig().replace(
@@ -78,7 +80,10 @@ def test_shipped_artefacts_load_and_are_the_default_recipe():
     """`dpc-mjx eval` works without training, and `dpc-mjx train` with no options reproduces the
     recipe the shipped policy was trained with."""
     art = io.load(SHIPPED)
-    assert set(art.encoders) == {"regular"} and art.meta["extra"]["task"] == "a1_arm/reaching"
+    # its own arm first, then the encoders transferred to it (`dpc-mjx transfer --samples 10000`)
+    assert list(art.meta["encoders"]) == ["regular", *TRANSFERRED]
+    assert all(art.arm_spec(arm) == arm for arm in art.encoders)
+    assert art.meta["extra"]["task"] == "a1_arm/reaching"
     defaults = RunConfig()
     # read with today's SacConfig (options added since default to what the export did)
     assert SacConfig(**tuples(art.meta["sac_config"])) == defaults.sac

@@ -33,7 +33,7 @@ def test_render_writes_a_playable_mp4_of_the_episode(monkeypatch, tmp_path, caps
 def test_gifs_and_bad_requests(tmp_path, monkeypatch):
     frames = np.random.default_rng(0).integers(0, 255, (10, 24, 32, 3), dtype=np.uint8)
     gif = Image.open(write_video(frames, tmp_path / "clip.gif"))
-    assert gif.n_frames == 5 and gif.size == (32, 24)  # 25 frames per second from 50
+    assert gif.n_frames == 3 and gif.size == (32, 24)  # 12.5 frames per second from 50
     with pytest.raises(DpcError, match=r"as \.mp4 or \.gif"):
         write_video(frames, tmp_path / "clip.avi")
     assert cli.main(["render", "--out", str(tmp_path / "c.mov")]) == 2

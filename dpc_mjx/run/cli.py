@@ -109,6 +109,7 @@ def _render(args: argparse.Namespace) -> None:
         seconds=args.seconds,
         seed=args.seed,
         episode=args.episode,
+        episodes=args.episodes,
         width=args.width,
         height=args.height,
     )
@@ -260,6 +261,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=float, default=2.0)
     p.add_argument("--seed", type=int, default=0, help="as dpc-mjx eval --seed")
     p.add_argument("--episode", type=int, default=0, help="episode index within the seed")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        help="the evaluation's episode count: replays its batch, so its episode to the last bit "
+        "(default: episode + 1 envs, which may round differently)",
+    )
     p.add_argument("--width", type=int, default=480)
     p.add_argument("--height", type=int, default=360)
     p.set_defaults(handler=_render)

@@ -4,9 +4,11 @@ Headless on any Linux machine: the OpenGL context is OSMesa (software; Debian's 
 installed by `make render-deps`) or EGL (a GPU driver's), from `MUJOCO_GL` when set, else EGL
 where JAX sees a GPU and OSMesa otherwise. Frames are taken once per env step (50 Hz), with a
 camera that follows the trunk; end-effector pushes are drawn as red arrows (0.005 m per N) from
-the end effector. `record_episode` runs exactly the evaluation's episode (`run.eval`: episode i of
-seed s starts from the i-th reset key and draws the i-th step keys; the batch here is i + 1 envs,
-so XLA may round differently and a marginal fall can go the other way).
+the end effector. `record_episode` runs the evaluation's episode (`run.eval`: episode i of seed s
+starts from the i-th reset key and draws the i-th step keys); with the evaluation's batch
+(`episodes`, `dpc-mjx render --episodes`) it is that episode to the last bit, with a smaller
+batch (default i + 1 envs) XLA may round differently, and a fall can come some steps earlier or
+later, or not at all.
 """
 
 from __future__ import annotations
@@ -31,15 +33,29 @@ BACKENDS = {  # MUJOCO_GL value -> what to install when it is missing
     "egl": "a GPU driver with EGL (libEGL), or use MUJOCO_GL=osmesa",
 }
 FPS = 50  # frames per second: one per env step of 20 ms
+GIF_FPS = 12.5  # GIFs keep every 4th frame: a few MB for a clip of seconds
 ARROW_M_PER_N = 0.005  # m of arrow per N of push
 ARROW_RGBA = (0.9, 0.1, 0.1, 1.0)
 
 
-def record_episode(env, seconds: float, seed: int, episode: int = 0, policy: Policy = zero_policy):
-    """Episode `episode` of `seed` stepped in MJX for `seconds`: (qpos (T + 1, nq), pushes
-    (T + 1, n_arms, 3) N world, done (T + 1,)), T = seconds / 0.02, from the reset on."""
+def record_episode(
+    env,
+    seconds: float,
+    seed: int,
+    episode: int = 0,
+    policy: Policy = zero_policy,
+    episodes: int | None = None,
+):
+    """Episode `episode` of `seed` stepped in MJX for `seconds` in a batch of `episodes` envs
+    (default episode + 1): (qpos (T + 1, nq), pushes (T + 1, n_arms, 3) N world, done (T + 1,)),
+    T = seconds / 0.02, from the reset on."""
+    episodes = episode + 1 if episodes is None else episodes
+    if not 0 <= episode < episodes:
+        raise DpcError(
+            f"Episode {episode} is not one of the {episodes} episodes; 0 <= i < {episodes}."
+        )
     steps = max(1, round(seconds * FPS))
-    carry, key = start(env, episode + 1, seed)
+    carry, key = start(env, episodes, seed)
 
     def pushes(state):
         def one(dist, time, qpos):
@@ -144,13 +160,13 @@ def gl_context(width: int, height: int):
 
 def write_video(frames: np.ndarray, path: str | pathlib.Path, fps: int = FPS) -> pathlib.Path:
     """Frames (T, H, W, 3) uint8 as an MP4 (H.264, through imageio-ffmpeg) or a GIF (Pillow, at
-    most 25 frames per second: every other frame at 50 Hz), by the file's suffix."""
+    most `GIF_FPS` frames per second), by the file's suffix."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".gif":
         from PIL import Image
 
-        step = max(1, round(fps / 25))
+        step = max(1, round(fps / GIF_FPS))
         images = [Image.fromarray(f) for f in frames[::step]]
         images[0].save(
             path, save_all=True, append_images=images[1:], duration=1000 * step / fps, loop=0
@@ -185,11 +201,13 @@ def render_rollout(
     seconds: float = 2.0,
     seed: int = 0,
     episode: int = 0,
+    episodes: int | None = None,
     width: int = 480,
     height: int = 360,
 ) -> dict[str, int | None]:
-    """Render episode `episode` of `seed` on `task` under each controller ('mbc', 'observer',
-    'oracle', 'dpc': the export's policy and the arm's encoder), side by side and labelled, into
+    """Render episode `episode` of `seed` (of a batch of `episodes`, see `record_episode`) on
+    `task` under each controller ('mbc', 'observer', 'oracle', 'dpc': the export's policy and the
+    arm's encoder), side by side and labelled, into
     `out` (.mp4 or .gif). Every controller runs under the export's env options (its policy frame
     and sensor model; its disturbances on the task it was trained on), as `dpc-mjx eval` does.
     Returns the env step of each controller's fall (None if it did not fall)."""
@@ -217,7 +235,7 @@ def render_rollout(
         )
         policy = art.dpc_policy(arm_name(arm_spec)) if controller == "dpc" else zero_policy
         print(f"render: {controller}, {seconds} s of episode {episode} (seed {seed})", flush=True)
-        qpos, pushes, done = record_episode(env, seconds, seed, episode, policy)
+        qpos, pushes, done = record_episode(env, seconds, seed, episode, policy, episodes)
         fell = int(np.argmax(done)) if done.any() else None
         falls[controller] = fell
         renderer = renderer or FrameRenderer(env.model, width, height)
