@@ -119,7 +119,10 @@ def latent_by_arm(per_arm: dict[str, tuple[np.ndarray, np.ndarray]], path) -> pa
     column per arm, z_0 against z_1 coloured by the next roll rate (top row) and pitch rate
     (bottom row), one colour scale per row shared by every arm."""
     n = len(per_arm)
-    fig, axes = plt.subplots(2, n, figsize=(2.9 * n + 1, 5.6), squeeze=False)
+    fig, axes = plt.subplots(
+        2, n, figsize=(2.6 * n + 1.2, 5.4), squeeze=False, sharex=True, sharey=True,
+        layout="constrained",
+    )  # fmt: skip
     for row, label in enumerate(("next roll rate (rad/s)", "next pitch rate (rad/s)")):
         values = np.concatenate([rates[:, row] for _, rates in per_arm.values()])
         lim = np.percentile(np.abs(values), 98)
@@ -129,11 +132,12 @@ def latent_by_arm(per_arm: dict[str, tuple[np.ndarray, np.ndarray]], path) -> pa
                 z[:, 0], z[:, 1], c=rates[:, row], s=2, cmap="coolwarm", vmin=-lim, vmax=lim
             )
             ax.set_title(name if row == 0 else "")
-            ax.set_xlabel("z_0")
+            if row == 1:
+                ax.set_xlabel("z_0")
             if col == 0:
                 ax.set_ylabel("z_1")
             ax.grid(alpha=0.3)
-        fig.colorbar(art, ax=axes[row, :].tolist(), label=label, shrink=0.9)
+        fig.colorbar(art, ax=axes[row, :].tolist(), label=label, shrink=0.9, pad=0.01)
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
