@@ -32,6 +32,7 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots.urdf import strip_meshes
 
 SUFFIXES = {".urdf": "urdf", ".xml": "mjcf"}
 MESH_FORMATS = (".stl", ".obj", ".msh")  # the mesh files MuJoCo reads
@@ -80,21 +81,19 @@ def read(
     path: str | os.PathLike,
     *,
     ee_body: str | None = None,
-    drop_links: tuple[str, ...] = (),
     keep_meshes: bool = True,
 ) -> ArmFile:
     """Read and check an arm file (see the module doc); `DpcError` naming the problem and the fix.
 
-    `drop_links` (URDF) removes links before reading; `keep_meshes=False` drops every mesh (the
-    library's wheel arms, whose meshes are COLLADA).
+    `keep_meshes=False` drops every mesh (the library's wheel arms, whose meshes are COLLADA).
     """
     p, kind = check_path(path)
-    cached = _read_cached(p, p.stat().st_mtime_ns, kind, ee_body, drop_links, keep_meshes)
+    cached = _read_cached(p, p.stat().st_mtime_ns, kind, ee_body, keep_meshes)
     return dataclasses.replace(cached, spec=cached.spec.copy())  # the caller may edit its spec
 
 
 @functools.lru_cache(maxsize=32)
-def _read_cached(p, _mtime, kind, ee_body, drop_links, keep_meshes) -> ArmFile:
+def _read_cached(p, _mtime, kind, ee_body, keep_meshes) -> ArmFile:
     try:
         tree = ET.parse(p).getroot()
     except ET.ParseError as e:
@@ -106,7 +105,7 @@ def _read_cached(p, _mtime, kind, ee_body, drop_links, keep_meshes) -> ArmFile:
             f"<{tree.tag}>; give a URDF (.urdf, <robot>) or an MJCF (.xml, <mujoco>) file."
         )
     if kind == "urdf":
-        xml, root, dropped, has_geometry = _prepare_urdf(p, tree, drop_links, keep_meshes)
+        xml, root, dropped, has_geometry = _prepare_urdf(p, tree, keep_meshes)
     else:
         xml, root, dropped, has_geometry = _prepare_mjcf(p, tree, keep_meshes)
     for name in dropped:
@@ -168,15 +167,11 @@ def inside(rng: tuple[float, float]) -> tuple[float, float]:
 # URDF
 
 
-def _prepare_urdf(p, tree, drop_links, keep_meshes) -> tuple[str, str, list[str], bool]:
+def _prepare_urdf(p, tree, keep_meshes) -> tuple[str, str, list[str], bool]:
     """The URDF as MuJoCo should read it (meshes resolved, dummy roots dropped, our compiler
     options), its root link, the meshes dropped for their format, whether any geometry is left."""
     links = {link.get("name"): link for link in tree.findall("link")}
     joints = tree.findall("joint")
-    for name in drop_links:
-        if name in links:
-            tree.remove(links.pop(name))
-    joints = [j for j in joints if _ends(j) <= set(links) or tree.remove(j)]
     children = {j.find("child").get("link") for j in joints}
     roots = [name for name in links if name not in children]
     if len(roots) != 1:
@@ -221,26 +216,22 @@ def _urdf_geometry(p: pathlib.Path, links: dict, keep_meshes: bool) -> list[str]
     arms) every <visual> and mesh, keeping the primitive collision shapes."""
     dropped = []
     for link in links.values():
+        if not keep_meshes:
+            strip_meshes(link)
+            continue
         has_visual = link.find("visual") is not None
         for element in [*link.findall("visual"), *link.findall("collision")]:
             mesh = element.find("geometry/mesh")
             file = "" if mesh is None else mesh.get("filename", "")
             unreadable = mesh is not None and pathlib.Path(file).suffix.lower() not in MESH_FORMATS
-            if not keep_meshes:
-                drop = element.tag == "visual" or mesh is not None
-            else:
-                drop = (element.tag == "collision" and has_visual) or unreadable
-                if unreadable and not (element.tag == "collision" and has_visual):
-                    dropped.append(file)
-            if drop:
+            hidden = element.tag == "collision" and has_visual
+            if unreadable and not hidden:
+                dropped.append(file)
+            if hidden or unreadable:
                 link.remove(element)
             elif mesh is not None:
                 mesh.set("filename", str(_mesh_path(p, file, f"link {link.get('name')!r}")))
     return dropped
-
-
-def _ends(joint: ET.Element) -> set[str]:
-    return {joint.find("parent").get("link"), joint.find("child").get("link")}
 
 
 def _mass(link: ET.Element) -> float:

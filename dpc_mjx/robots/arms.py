@@ -189,7 +189,6 @@ class UrdfArm:
             return arm_file.read(
                 assets.urdf_path(self.urdf),
                 ee_body=self.ee_body or info.ee_body,
-                drop_links=info.drop,
                 keep_meshes=False,
             )
         return arm_file.read(self.urdf, ee_body=self.ee_body)
@@ -230,7 +229,6 @@ class UrdfArm:
 
 @dataclasses.dataclass(frozen=True)
 class _UrdfArmInfo:
-    drop: tuple[str, ...]  # dummy links removed before loading
     ee_body: str
     ee_offset: tuple[float, float, float]  # m, in ee_body's frame
     home: dict[str, float]  # rad; joints not named start at 0 clipped into their range
@@ -238,9 +236,10 @@ class _UrdfArmInfo:
 
 URDF_ARMS = {
     # SO-100 (5 DOF + jaw). Its URDF <limit effort=35> is far above the real servos; we cap gains.
-    "so100": _UrdfArmInfo((), "gripper", (0.0, -0.09, 0.0), {"shoulder_lift": 0.3}),
-    # Unitree Z1 (6 DOF + gripper), folded in its URDF zero pose.
-    "z1": _UrdfArmInfo(("world",), "link06", (0.15, 0.0, 0.0), {}),
+    "so100": _UrdfArmInfo("gripper", (0.0, -0.09, 0.0), {"shoulder_lift": 0.3}),
+    # Unitree Z1 (6 DOF + gripper), folded in its URDF zero pose; its massless `world` link is
+    # skipped as the root (`arm_file`).
+    "z1": _UrdfArmInfo("link06", (0.15, 0.0, 0.0), {}),
 }
 _URDF_KP_CAP = 40.0  # N·m/rad
 

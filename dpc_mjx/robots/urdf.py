@@ -26,11 +26,7 @@ def load_urdf(name: str, *, drop_links: tuple[str, ...] = ()) -> mujoco.MjSpec:
     """
     root = ET.parse(assets.urdf_path(name)).getroot()
     for link in root.findall("link"):
-        for visual in link.findall("visual"):
-            link.remove(visual)
-        for collision in link.findall("collision"):
-            if collision.find("geometry/mesh") is not None:
-                link.remove(collision)
+        strip_meshes(link)
         if link.get("name") in drop_links:
             root.remove(link)
     for joint in root.findall("joint"):
@@ -45,6 +41,16 @@ def load_urdf(name: str, *, drop_links: tuple[str, ...] = ()) -> mujoco.MjSpec:
     for geom in spec.geoms:
         make_visual(geom)
     return spec
+
+
+def strip_meshes(link: ET.Element) -> None:
+    """Remove a URDF link's <visual>s (the wheel's are COLLADA) and its mesh <collision>s, keeping
+    its primitive collision shapes (made visual-only once loaded)."""
+    for visual in link.findall("visual"):
+        link.remove(visual)
+    for collision in link.findall("collision"):
+        if collision.find("geometry/mesh") is not None:
+            link.remove(collision)
 
 
 def make_visual(geom: mujoco.MjsGeom) -> None:
