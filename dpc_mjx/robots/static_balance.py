@@ -23,11 +23,12 @@ import dataclasses
 import functools
 import math
 
+import jax.numpy as jp
 import mujoco
 import numpy as np
 from scipy.optimize import linprog
 
-from dpc_mjx.control.balance import DEFAULTS, GRAVITY
+from dpc_mjx.control.balance import GRAVITY, default_params, friction_constraints
 from dpc_mjx.errors import DpcError
 
 SAMPLES = 64  # random arm configurations besides the home pose
@@ -109,46 +110,43 @@ def _torque_share(model, data, lay) -> tuple[float, tuple[float, float]]:
     mass = float(model.body_mass.sum())
     com = data.subtree_com[0]
     feet = data.site_xpos[lay.foot_sites]  # (4, 3)
-    mu, f_min, f_max = DEFAULTS["mu"], DEFAULTS["f_min"], DEFAULTS["f_max"]
     n = 13  # f (12) then s
     a_eq = np.zeros((6, n))
     for i in range(4):
         a_eq[:3, 3 * i : 3 * i + 3] = np.eye(3)
         a_eq[3:, 3 * i : 3 * i + 3] = _skew(feet[i] - com)
     b_eq = np.array([0.0, 0.0, mass * GRAVITY, 0.0, 0.0, 0.0])
-    rows, h = [], []
+    # the balance QP's own friction pyramids and force bounds, all four feet in stance
+    g, h = (np.asarray(a, float) for a in _friction_rows())
+    rows, h = [np.concatenate([g, np.zeros((len(g), 1))], 1)], list(h)
     tau_max = np.abs(model.actuator_ctrlrange[lay.leg_act]).max(axis=1)  # (12,) N·m
     jac = np.zeros((3, model.nv))
     for i in range(4):
-        fx, fy, fz = 3 * i, 3 * i + 1, 3 * i + 2
-        for a, b in ((fx, 1), (fx, -1), (fy, 1), (fy, -1)):  # +-f_xy - mu f_z <= 0
-            row = np.zeros(n)
-            row[a], row[fz] = b, -mu
-            rows.append(row)
-            h.append(0.0)
-        for sign, bound in ((1, f_max), (-1, -f_min)):
-            row = np.zeros(n)
-            row[fz] = sign
-            rows.append(row)
-            h.append(bound)
         mujoco.mj_jacSite(model, data, jac, None, lay.foot_sites[i])
-        leg = lay.leg_dof[3 * i : 3 * i + 3]
-        jt = jac[:, leg].T  # (3 joints, 3 force components): tau = J^T f
+        jt = jac[:, lay.leg_dof[3 * i : 3 * i + 3]].T  # (3 joints, 3 force components): J^T f
         for j in range(3):
-            for sign in (1, -1):
+            for sign in (1, -1):  # +-(J^T f)_j - s tau_max_j <= 0
                 row = np.zeros(n)
                 row[3 * i : 3 * i + 3] = sign * jt[j]
                 row[12] = -tau_max[3 * i + j]
-                rows.append(row)
+                rows.append(row[None])
                 h.append(0.0)
     cost = np.zeros(n)
     cost[12] = 1.0
     res = linprog(
-        cost, A_ub=np.array(rows), b_ub=np.array(h), A_eq=a_eq, b_eq=b_eq,
+        cost, A_ub=np.concatenate(rows), b_ub=np.array(h), A_eq=a_eq, b_eq=b_eq,
         bounds=[(None, None)] * 12 + [(0, None)], method="highs",
     )  # fmt: skip
     offset = tuple(float(v) for v in (com - feet.mean(axis=0))[:2])
     return (float(res.x[12]) if res.status == 0 else math.inf), offset
+
+
+@functools.cache
+def _friction_rows():
+    """G (24, 12), h (24,) of `control.balance.friction_constraints` at its DEFAULTS, four feet
+    in stance (computed once)."""
+    p = default_params()
+    return friction_constraints(p.mu, p.f_min, p.f_max, jp.ones(4, bool))
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
