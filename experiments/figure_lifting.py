@@ -19,12 +19,11 @@ from __future__ import annotations
 
 import argparse
 
-import jax
 import numpy as np
 
 from dpc_mjx import io
 from dpc_mjx.envs.registry import make
-from dpc_mjx.envs.rollout import make_chunk, start, zero_policy
+from dpc_mjx.envs.rollout import record_episodes, zero_policy
 from dpc_mjx.rotations import roll_pitch_yaw
 from dpc_mjx.run.pipeline import SHIPPED, env_overrides
 from dpc_mjx.run.plots import lifting_trajectory
@@ -43,21 +42,6 @@ def record(before, after) -> dict:
         "command": after.info["dist"].command,
         "done": after.done,
     }
-
-
-def rollout(env, policy, episodes: int, steps: int, seed: int) -> dict[str, np.ndarray]:
-    """(steps + 1, episodes, ...) arrays of `record` from the reset on, no auto-reset."""
-    carry, key = start(env, episodes, seed)
-    s0 = carry[0]
-    first = {
-        "pos": np.asarray(s0.pipeline_state.qpos[:, :2]),
-        "yaw": np.asarray(roll_pitch_yaw(s0.pipeline_state.qpos[:, 3:7])[:, 2]),
-        "command": np.asarray(s0.info["dist"].command),
-        "done": np.zeros(episodes),
-    }
-    _, records = make_chunk(jax.vmap(env.step), policy, steps, record)(carry, key)
-    records = jax.device_get(records)
-    return {k: np.concatenate([first[k][None], np.asarray(v)]) for k, v in records.items()}
 
 
 def desired_path(r: dict[str, np.ndarray]) -> np.ndarray:
@@ -90,7 +74,7 @@ def main() -> None:
         ("DPC", "policy", art.dpc_policy("regular")),
     ):
         env = make(TASK, arm="regular", controller=controller, **overrides)
-        r = rollout(env, policy, args.episodes, args.steps, args.seed)
+        r = record_episodes(env, args.episodes, args.steps, args.seed, record, policy)
         r["desired"] = desired_path(r)
         standing = np.cumsum(r["done"], 0) == 0
         err = np.linalg.norm(r["pos"] - r["desired"], axis=-1)

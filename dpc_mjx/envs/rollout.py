@@ -10,6 +10,8 @@ benchmarks (`make_chunk`). Three layers:
     scan_steps(...)                   `len(keys)` steps under `lax.scan` (pure, jit-able)
     make_chunk / chunks               jitted chunks of steps, iterated on the host; the caller
                                       decides when to stop (and shows progress)
+    record_episodes                   one scan of per-step records from the reset on (videos,
+                                      trajectory figures)
 
 A tally is per env and ends at the env's first done (fall or NaN reset): its return is the sum of
 rewards up to and including the done step (so a fall's penalty counts once), and its error sums
@@ -126,6 +128,18 @@ def chunks(run_chunk: Callable, carry: Carry, key: jax.Array) -> Iterator[tuple[
         carry, records = run_chunk(carry, k)
         jax.block_until_ready(carry)
         yield carry, jax.device_get(records)
+
+
+def record_episodes(
+    env: Env, episodes: int, steps: int, seed: int, record: Record, policy: Policy = zero_policy
+) -> Any:
+    """`record` of every step of `episodes` envs (one batch from `seed`, as `run_episodes`, no
+    auto-reset) for `steps` env steps, from the reset on (`record(reset, reset)` first): the
+    records as numpy, each (steps + 1, episodes, ...). One jitted scan of `steps` steps."""
+    carry, key = start(env, episodes, seed)
+    first = jax.device_get(jax.jit(record)(carry[0], carry[0]))
+    _, rest = jax.device_get(make_chunk(jax.vmap(env.step), policy, steps, record)(carry, key))
+    return jax.tree.map(lambda f, r: np.concatenate([np.asarray(f)[None], r]), first, rest)
 
 
 def run_episodes(

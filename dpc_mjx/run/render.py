@@ -21,7 +21,7 @@ import jax
 import mujoco
 import numpy as np
 
-from dpc_mjx.envs.rollout import Policy, make_chunk, start, zero_policy
+from dpc_mjx.envs.rollout import Policy, record_episodes, zero_policy
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import a1
 from dpc_mjx.robots.arms import EE_SITE
@@ -55,24 +55,17 @@ def record_episode(
             f"Episode {episode} is not one of the {episodes} episodes; 0 <= i < {episodes}."
         )
     steps = max(1, round(seconds * FPS))
-    carry, key = start(env, episodes, seed)
-
-    def pushes(state):
-        def one(dist, time, qpos):
-            return env.sampler.pushes(dist, time, roll_pitch_yaw(qpos[3:7])[2])
-
-        return jax.vmap(one)(
-            state.info["dist"], state.pipeline_state.time, state.pipeline_state.qpos
-        )
 
     def record(before, after):
         del before
-        return after.pipeline_state.qpos, pushes(after), after.done
 
-    s0 = carry[0]
-    first = jax.device_get((s0.pipeline_state.qpos, jax.jit(pushes)(s0), s0.done))
-    _, rest = jax.device_get(make_chunk(jax.vmap(env.step), policy, steps, record)(carry, key))
-    qpos, push, done = (np.concatenate([f[None], r]) for f, r in zip(first, rest, strict=True))
+        def pushes(dist, time, qpos):
+            return env.sampler.pushes(dist, time, roll_pitch_yaw(qpos[3:7])[2])
+
+        state = after.pipeline_state
+        return state.qpos, jax.vmap(pushes)(after.info["dist"], state.time, state.qpos), after.done
+
+    qpos, push, done = record_episodes(env, episodes, steps, seed, record, policy)
     return qpos[:, episode], push[:, episode], done[:, episode]
 
 
