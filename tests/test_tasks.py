@@ -260,3 +260,15 @@ def test_registry_names_and_configs():
     cfg = registry.get_config("a1_arm/carrying_high", grasp_threshold=0.02)
     assert isinstance(cfg, carrying.CarryingConfig) and cfg.grasp_threshold == 0.02
     assert registry.get_config("a1_arm/pushing").push_force == (0.0, 0.0)  # contact force only
+
+
+def test_the_controller_models_the_bare_a1_on_every_scene():
+    """The controller's model (A1 mass, COM offset, inertia) is the robot's own tree without its
+    arms, whatever the scene holds: a task's box, balls and tables are not part of the robot
+    (before this was fixed, pushing's 1 kg box added 1 kg and moved the COM 4.8 cm forward)."""
+    bare = dpc_mjx.make("a1_arm/reaching", arm="none").controller.idx
+    for task, arm in (*_DEFAULTS.items(), ("carrying", "double")):
+        idx = dpc_mjx.make(f"a1_arm/{task}", arm=arm).controller.idx
+        assert idx.a1_mass == pytest.approx(bare.a1_mass, rel=1e-9), task
+        np.testing.assert_allclose(idx.com_offset, bare.com_offset, atol=1e-9, err_msg=task)
+        np.testing.assert_allclose(idx.a1_inertia, bare.a1_inertia, atol=1e-9, err_msg=task)

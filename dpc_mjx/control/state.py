@@ -52,7 +52,11 @@ def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
     arm_bodies = set()
     for arm in lay.arms:
         arm_bodies.update(int(b) for b in arm.bodies)
-    bodies = [b for b in range(1, model.nbody) if b not in arm_bodies]
+    # the robot's own tree (a task's objects and tables are other trees), without its arms
+    robot = model.body_rootid[lay.trunk]
+    bodies = [
+        b for b in range(1, model.nbody) if model.body_rootid[b] == robot and b not in arm_bodies
+    ]
     mass = float(model.body_mass[bodies].sum())
     com = sum(model.body_mass[b] * data.xipos[b] for b in bodies) / mass
     inertia = np.zeros((3, 3))
