@@ -1,7 +1,9 @@
 """`DpcEnv`: one A1-with-arms env in MJX behind the brax `Env` API, unbatched and pure.
 
-One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller tick -> mjx.step]
-at the physics rate (250 Hz), with u chosen by `config.controller`:
+One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller tick -> physics
+step] at the physics rate (250 Hz), with u chosen by `config.controller`. The physics step is
+`mjx.step`, or MuJoCo C's `mj_step` on the same model with `config.engine = 'native'`
+(`dpc_mjx/physics.py`: sim-to-sim); everything else is the same code under both engines.
 
     'policy': u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)       (DPC)
               in the yaw frame (turned to the world at each tick) or the world frame
@@ -30,7 +32,7 @@ Tasks customise the env through hooks, never by rewriting `step`:
     check_arm(robot)        raise `DpcError` for an arm the task cannot use (before any compile)
     arm_targets(dist, t, d) (n_act,) arm servo targets at physics time t: the reference motion
                             p_arm (reaching: the sampler's random targets; tasks: scripts)
-    task_physics(d, t)      edits the data before each mjx.step (carrying: grasp welds)
+    task_physics(d, t)      edits the data before each physics step (carrying: grasp welds)
     task_metrics(d)         extra per-step metrics (scalars, the same keys at reset and step)
 
 Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`control.state.has_fallen`). A
@@ -56,6 +58,7 @@ from dpc_mjx.envs import observations, rewards
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, make_sampler
 from dpc_mjx.errors import DpcError
+from dpc_mjx.physics import make_physics
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.objects import prop_layout
@@ -96,6 +99,7 @@ class DpcEnv(Env):
         self.n_substeps = n_sub
         self.lay = layout(self.model)
         self.mx = sim.put_model(self.model)
+        self.physics = make_physics(config.engine, self.model, self.mx)
         self.controller = make_controller(self.model, gait_=_GAITS[config.gait]())
         self.sampler = make_sampler(config, self.model, self.lay)
         self.obs_layout = observations.ObsLayout.of(self.lay)
@@ -125,8 +129,8 @@ class DpcEnv(Env):
         return self.sampler.arm_targets(dist, t)
 
     def task_physics(self, d: mjx.Data, t: jax.Array) -> mjx.Data:
-        """The data handed to `mjx.step` at physics time t (s), after the controller set `ctrl`
-        and `xfrc_applied`: tasks switch grasp welds here. Pure, jit-safe."""
+        """The data handed to the physics step at physics time t (s), after the controller set
+        `ctrl` and `xfrc_applied`: tasks switch grasp welds here. Pure, jit-safe."""
         del t
         return d
 
@@ -169,7 +173,7 @@ class DpcEnv(Env):
         dist = self.sampler.init(k_dist)
         ctrl = jp.asarray(model.key_ctrl[0], jp.float32)
         d = mjx.make_data(self.mx).replace(qpos=qpos, ctrl=ctrl)
-        d = mjx.forward(self.mx, d)
+        d = self.physics.forward(d)
         d = d.replace(ctrl=ctrl.at[lay.arm_act].set(self.arm_targets(dist, jp.zeros(()), d)))
         n_arm = len(lay.arm_dof)
         if self._sensing:
@@ -202,28 +206,19 @@ class DpcEnv(Env):
         dist = self.sampler.advance(info["dist"], d0.time, key)
         bias, scale = info["sensor_bias"], self.config.sensor_noise
         command = dist.command
-        u_policy = self._u_scale * jp.clip(action, -1.0, 1.0)
+        u_policy = self.policy_u(action)
 
         def substep(carry, tick_key):
             d, cs, queue, _ = carry
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
-            if self.config.controller == "mbc":
-                u = jp.zeros(ACTION_SIZE)
-            elif self.config.controller == "oracle":
-                u = oracle_u(self.lay, d, self._com_pos(d))
-            elif self.config.controller == "observer":
-                u = None  # the controller's own observer estimate of this tick
-            elif self.config.u_frame == "yaw":  # the policy's u turns with the heading
-                u = wrench_to_world(u_policy, self._yaw(d))
-            else:
-                u = u_policy
+            u = self.controller_u(d, u_policy)
             targets = self.arm_targets(dist, d.time, d)
             cs, ctrl = self.controller.step(cs, d, command, u, targets, noise)
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
             xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
             d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time)
-            d = mjx.step(self.mx, d)
+            d = self.physics.step(d)
             return (d, cs, queue, bias if noise is None else noise), None
 
         carry = (d0, info["ctrl"], info["ctrl_queue"], bias)
@@ -280,6 +275,27 @@ class DpcEnv(Env):
             metrics={**state.metrics, **new_metrics},
             info=info,
         )
+
+    # the disturbance u -----------------------------------------------------------------------
+
+    def policy_u(self, action: jax.Array) -> jax.Array:
+        """(6,) the policy's u in `config.u_frame` (N, N·m) for an action (6,) (clipped to
+        [-1, 1], times `EnvConfig.u_scale`)."""
+        return self._u_scale * jp.clip(action, -1.0, 1.0)
+
+    def controller_u(self, d, u_policy: jax.Array) -> jax.Array | None:
+        """(6,) u of this tick for the controller (world frame, about the A1 COM), by
+        `config.controller`, or None for the observer's own estimate; `u_policy` from
+        `policy_u` (used by 'policy' only)."""
+        if self.config.controller == "mbc":
+            return jp.zeros(ACTION_SIZE)
+        if self.config.controller == "oracle":
+            return oracle_u(self.lay, d, self._com_pos(d))
+        if self.config.controller == "observer":
+            return None  # the controller's own observer estimate of this tick
+        if self.config.u_frame == "yaw":  # the policy's u turns with the heading
+            return wrench_to_world(u_policy, self._yaw(d))
+        return u_policy
 
     # helpers --------------------------------------------------------------------------------
 

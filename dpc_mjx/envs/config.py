@@ -13,6 +13,7 @@ import math
 from typing import Any
 
 from dpc_mjx.errors import DpcError
+from dpc_mjx.physics import ENGINES
 
 CONTROLLERS = ("policy", "mbc", "oracle", "observer")
 U_FRAMES = ("yaw", "world")
@@ -29,6 +30,9 @@ class EnvConfig:
     gait: str = "trot"  # 'trot' or 'stand'
     policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
+    # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device) or 'native' (MuJoCo C
+    # on the same model, threads on the host: sim-to-sim, and the faster path on a CPU)
+    engine: str = "mjx"
 
     # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]]
     # (per axis x, y, z of `u_frame`; about the A1 COM). A number applies to all three axes.
@@ -114,6 +118,7 @@ class EnvConfig:
         """Raise `DpcError` naming the first invalid field and what it must be."""
         _choice("controller", self.controller, CONTROLLERS)
         _choice("gait", self.gait, GAITS)
+        _choice("engine", self.engine, ENGINES)
         _choice("u_frame", self.u_frame, U_FRAMES)
         _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
         _int("sensor_delay", self.sensor_delay, 0, 10)

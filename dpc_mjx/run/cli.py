@@ -7,6 +7,8 @@
     dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
                                        (--arm my_arm.urdf, .xml or .json: your own arm)
     dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
+                                       (--engine native: MuJoCo C instead of MJX)
+    dpc-mjx sim2sim --export DIR       the same cells in MJX and in native MuJoCo, side by side
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
     dpc-mjx render --out clip.mp4      a video of an episode (--compare mbc dpc: side by side)
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
@@ -93,7 +95,35 @@ def _eval(args: argparse.Namespace) -> None:
         seed=args.seed,
         out=args.out,
         csv=args.csv or _default_csv(args),
+        env=_env_options(args),
+    )
+
+
+def _env_options(args: argparse.Namespace) -> dict:
+    """`--env NAME=VALUE ...` with `--engine` (if given) as the engine."""
+    env = _parse_sets(args.env)
+    if getattr(args, "engine", None):
+        if env.get("engine", args.engine) != args.engine:
+            raise DpcError(f"--engine {args.engine} and --env engine={env['engine']} disagree.")
+        env["engine"] = args.engine
+    return env
+
+
+def _sim2sim(args: argparse.Namespace) -> None:
+    from dpc_mjx.run.pipeline import SHIPPED
+    from dpc_mjx.run.sim2sim import sim2sim
+
+    sim2sim(
+        args.export or SHIPPED,
+        arms=args.arms,
+        controllers=args.controllers,
+        task=args.task,
+        episodes=args.episodes,
+        steps=args.steps,
+        seed=args.seed,
         env=_parse_sets(args.env),
+        out=args.out,
+        csv=args.csv or _default_csv(args, "sim2sim-"),
     )
 
 
@@ -115,11 +145,12 @@ def _render(args: argparse.Namespace) -> None:
     )
 
 
-def _default_csv(args: argparse.Namespace) -> pathlib.Path:
-    """Beside `--out` (same name, .csv), else runs/eval/<task>-seed<seed>.csv."""
+def _default_csv(args: argparse.Namespace, prefix: str = "") -> pathlib.Path:
+    """Beside `--out` (same name, .csv), else runs/eval/<prefix><task>-seed<seed>.csv."""
     if args.out:
         return pathlib.Path(args.out).with_suffix(".csv")
-    return pathlib.Path("runs", "eval", f"{args.task.replace('/', '-')}-seed{args.seed}.csv")
+    name = f"{prefix}{args.task.replace('/', '-')}-seed{args.seed}.csv"
+    return pathlib.Path("runs", "eval", name)
 
 
 def _export(args: argparse.Namespace) -> None:
@@ -204,39 +235,54 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(handler=_transfer)
 
+    def eval_options(p):
+        p.add_argument(
+            "--export", help="an export folder (default: the shipped dpc_mjx/artefacts/regular)"
+        )
+        p.add_argument(
+            "--arms",
+            nargs="+",
+            help="arms: encoder names, variants, arm files or descriptions (default: the arm "
+            "the policy was trained on)",
+        )
+        p.add_argument(
+            "--controllers",
+            nargs="+",
+            default=["mbc", "observer", "dpc", "oracle"],
+            help="any of mbc observer dpc oracle (default: all four)",
+        )
+        p.add_argument("--task", default="a1_arm/reaching")
+        p.add_argument("--episodes", type=int, default=64)
+        p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
+        p.add_argument("--seed", type=int, default=1000)
+        p.add_argument("--out", help="also write the table to this markdown file")
+        p.add_argument(
+            "--env",
+            nargs="*",
+            default=[],
+            metavar="NAME=VALUE",
+            help="env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact "
+            "sensors)",
+        )
+        p.add_argument(
+            "--csv",
+            help="one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>"
+            ".csv)",
+        )
+
     p = sub.add_parser("eval", help="MBC / observer / DPC / oracle, 95% intervals")
+    eval_options(p)
     p.add_argument(
-        "--export", help="an export folder (default: the shipped dpc_mjx/artefacts/regular)"
-    )
-    p.add_argument(
-        "--arms",
-        nargs="+",
-        help="arms: encoder names, variants, arm files or descriptions (default: the arm the "
-        "policy was trained on)",
-    )
-    p.add_argument(
-        "--controllers",
-        nargs="+",
-        default=["mbc", "observer", "dpc", "oracle"],
-        help="any of mbc observer dpc oracle (default: all four)",
-    )
-    p.add_argument("--task", default="a1_arm/reaching")
-    p.add_argument("--episodes", type=int, default=64)
-    p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
-    p.add_argument("--seed", type=int, default=1000)
-    p.add_argument("--out", help="also write the table to this markdown file")
-    p.add_argument(
-        "--env",
-        nargs="*",
-        default=[],
-        metavar="NAME=VALUE",
-        help="env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact sensors)",
-    )
-    p.add_argument(
-        "--csv",
-        help="one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)",
+        "--engine",
+        choices=["mjx", "native"],
+        help="physics: mjx (default) or native MuJoCo C (the same results up to the engines' "
+        "differences; faster on a CPU, docs/benchmarks.md)",
     )
     p.set_defaults(handler=_eval)
+
+    p = sub.add_parser("sim2sim", help="the eval cells in MJX and in native MuJoCo, side by side")
+    eval_options(p)
+    p.set_defaults(handler=_sim2sim)
 
     p = sub.add_parser("export", help="export a run's adapter and policy")
     p.add_argument("--run", required=True)

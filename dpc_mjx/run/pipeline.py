@@ -54,6 +54,7 @@ EPISODES_FILE = "eval_episodes.csv"  # the evaluation, one row per episode
 # The env options that belong to the policy rather than the task (they follow an export to any
 # task), with the values of exports written before they existed
 _POLICY_ENV_BEFORE = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
+_CHOSEN_PER_USE = ("controller", "engine")  # env options an export's env_config never imposes
 
 
 def train_and_evaluate(
@@ -315,12 +316,12 @@ def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = Non
 
 def env_overrides(artefacts: io.Artefacts, task: str | None = None) -> dict:
     """The env options an export was trained with (its sidecar's env_config), to evaluate and
-    transfer under the same disturbances; the controller is chosen per use. On another `task`
-    than the export's, only the policy's frame and the sensor model carry over (the task brings
-    its own disturbances). An export written before `EnvConfig.u_frame` and the sensor model
-    existed acted in the world frame and was trained with exact sensors."""
+    transfer under the same disturbances; the controller and the engine are chosen per use. On
+    another `task` than the export's, only the policy's frame and the sensor model carry over
+    (the task brings its own disturbances). An export written before `EnvConfig.u_frame` and the
+    sensor model existed acted in the world frame and was trained with exact sensors."""
     saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
-    saved = tuples({k: v for k, v in saved.items() if k != "controller"})
+    saved = tuples({k: v for k, v in saved.items() if k not in _CHOSEN_PER_USE})
     trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
     if task is not None and task != trained_on:
         return {k: saved[k] for k in _POLICY_ENV_BEFORE}
@@ -380,15 +381,7 @@ def evaluate_export(
     a variant, or an arm file or description as for `transfer_arm`),
     under the env options it was trained with and `env` over them (e.g. exact sensors); prints
     the table (and writes it to `out`, and one row per episode to `csv`)."""
-    artefacts = io.load(export_dir)
-    arms = [
-        artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
-        for arm in (arms or list(artefacts.meta["encoders"])[:1])
-    ]
-    if "dpc" in controllers:
-        for arm in arms:
-            artefacts.encoder(arm_name(arm))  # a missing encoder fails before any compile
-    overrides = {**env_overrides(artefacts, task), **(env or {})}
+    artefacts, arms, overrides = export_cells(export_dir, arms, controllers, task, env)
     return _evaluate_table(
         arms,
         list(controllers),
@@ -401,3 +394,24 @@ def evaluate_export(
         out=out,
         csv=csv,
     )
+
+
+def export_cells(
+    export_dir: str | pathlib.Path,
+    arms: list[str] | None,
+    controllers,
+    task: str,
+    env: dict | None = None,
+) -> tuple[io.Artefacts, list, dict]:
+    """What evaluating an export needs: its artefacts, the arms (`evaluate_export`'s rules; an
+    encoder missing for 'dpc' fails here, before any compile) and the env options (the
+    export's, then `env` over them)."""
+    artefacts = io.load(export_dir)
+    arms = [
+        artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
+        for arm in (arms or list(artefacts.meta["encoders"])[:1])
+    ]
+    if "dpc" in controllers:
+        for arm in arms:
+            artefacts.encoder(arm_name(arm))
+    return artefacts, arms, {**env_overrides(artefacts, task), **(env or {})}

@@ -1,0 +1,126 @@
+"""The native MuJoCo engine (`dpc_mjx.physics`): what it hands back equals MuJoCo C's own
+mj_step / mj_forward; an unstable step comes back as NaN; under the env, MJX and MuJoCo C agree
+on a short episode (the engines' contact models differ, so only to a tolerance)."""
+
+from csv import DictReader
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+from helpers import fast_jit
+from mujoco import mjx
+
+import dpc_mjx
+from dpc_mjx import sim
+from dpc_mjx.errors import DpcError
+from dpc_mjx.physics import OUTPUTS, NativePhysics, make_physics
+from dpc_mjx.robots import build
+from dpc_mjx.run.cli import main
+
+# float32 round trip of the inputs and outputs (the env's dtype) against MuJoCo in float64
+FLOAT32_TOL = 1e-5
+# MJX vs MuJoCo C, the same episode, 0.2 s (10 env steps): their contact solvers differ, so the
+# robots drift apart by ~1e-3 rad and the returns by ~1e-4 of their value; a wrong field or frame
+# would tip the robot over or change the return by far more.
+ENGINE_RETURN_TOL = 0.01  # relative
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build("regular")
+
+
+def _batch(model, n: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """`n` states near the home keyframe with random ctrl offsets and a push on the trunk."""
+    rng = np.random.default_rng(seed)
+    qpos = np.tile(model.key_qpos[0], (n, 1))
+    qpos[:, 7:] += rng.uniform(-0.1, 0.1, (n, model.nq - 7))
+    qvel = rng.normal(0, 0.2, (n, model.nv))
+    ctrl = np.tile(model.key_ctrl[0], (n, 1)) + rng.normal(0, 0.5, (n, model.nu))
+    xfrc = np.zeros((n, model.nbody, 6))
+    xfrc[:, 1, :3] = rng.normal(0, 20.0, (n, 3))
+    return {"qpos": qpos, "qvel": qvel, "ctrl": ctrl, "xfrc_applied": xfrc}
+
+
+def _reference(model, state: dict, i: int, advance: bool) -> mujoco.MjData:
+    d = mujoco.MjData(model)
+    d.qpos[:] = np.float32(state["qpos"][i])
+    d.qvel[:] = np.float32(state["qvel"][i])
+    d.ctrl[:] = np.float32(state["ctrl"][i])
+    d.xfrc_applied[:] = np.float32(state["xfrc_applied"][i])
+    (mujoco.mj_step if advance else mujoco.mj_forward)(model, d)
+    return d
+
+
+@pytest.mark.parametrize("advance", [True, False], ids=["step", "forward"])
+def test_native_engine_equals_mujoco_c(model, advance):
+    """Every field the engine hands back, for a batch split over 2 threads under jit(vmap),
+    equals a fresh MjData stepped by MuJoCo C from the same inputs."""
+    n = 5
+    state = _batch(model, n)
+    physics = NativePhysics(model, threads=2)
+    d0 = mjx.make_data(sim.put_model(model))
+    batch = jax.vmap(lambda q, v, u, x: d0.replace(qpos=q, qvel=v, ctrl=u, xfrc_applied=x))(
+        *(jp.asarray(state[k], jp.float32) for k in ("qpos", "qvel", "ctrl", "xfrc_applied"))
+    )
+    fn = physics.step if advance else physics.forward
+    out = jax.device_get(jax.jit(jax.vmap(fn))(batch))
+    for i in range(n):
+        ref = _reference(model, state, i, advance)
+        for k in OUTPUTS:
+            want = np.reshape(getattr(ref, k), np.shape(getattr(out, k))[1:])
+            got = np.asarray(getattr(out, k)[i], np.float64)
+            scale = max(1.0, float(np.max(np.abs(want))))
+            assert np.max(np.abs(got - want)) <= FLOAT32_TOL * scale, (k, i)
+    if advance:  # the state moved on
+        assert np.all(out.time > 0)
+
+
+def test_unstable_step_comes_back_as_nan(model, monkeypatch, tmp_path):
+    """MuJoCo resets the data to qpos0 on a huge velocity; the engine reports NaN instead, which
+    the env's NaN guard turns into a reset of that env."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warning to MUJOCO_LOG.TXT here
+    physics = NativePhysics(model, threads=1)
+    d = mjx.make_data(sim.put_model(model))
+    d = d.replace(qpos=jp.asarray(model.key_qpos[0], jp.float32), qvel=jp.full(model.nv, 1e12))
+    out = jax.jit(physics.step)(d)
+    assert np.all(np.isnan(np.asarray(out.qpos)))
+    assert np.all(np.isnan(np.asarray(out.qvel)))
+
+
+def test_sim2sim_runs_both_engines_on_the_same_episodes(monkeypatch, tmp_path, capsys):
+    """`dpc-mjx sim2sim` (MBC, exact sensors, 2 episodes of 0.2 s): both engines' rows, the
+    paired native - MJX row, and per episode the same robot under both engines, to their
+    contact differences (`ENGINE_RETURN_TOL`)."""
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: 10 steps of each env
+    out, csv = tmp_path / "s2s.md", tmp_path / "s2s.csv"
+    args = ["sim2sim", "--controllers", "mbc", "--episodes", "2", "--steps", "10", "--seed", "4"]
+    args += ["--env", "sensor_noise=0", "sensor_delay=0", "--out", str(out), "--csv", str(csv)]
+    assert main(args) == 0
+    table = out.read_text()
+    for engine in ("mjx", "native"):
+        assert f"| regular | mbc | {engine} | 0.00 [" in table
+    assert "| regular mbc: native - mjx |" in table
+    rows = list(DictReader(csv.open()))
+    assert [r["engine"] for r in rows] == ["mjx", "mjx", "native", "native"]
+    ret = {(r["engine"], r["episode"]): float(r["return"]) for r in rows}
+    for episode in ("0", "1"):
+        mjx_ret, native_ret = ret["mjx", episode], ret["native", episode]
+        assert abs(native_ret - mjx_ret) < ENGINE_RETURN_TOL * abs(mjx_ret)
+        assert native_ret != mjx_ret  # two engines, not one twice
+    assert "per-episode rows" in capsys.readouterr().out
+
+
+def test_engine_errors(model):
+    with pytest.raises(DpcError, match="engine='bullet' is not valid"):
+        dpc_mjx.make("a1_arm/reaching", engine="bullet")
+    with pytest.raises(DpcError, match="engine='bullet' is not valid"):
+        make_physics("bullet", model, None)
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_body(name="target", mocap=True).add_geom(size=[0.1, 0, 0])
+    with pytest.raises(DpcError, match="threads >= 1"):
+        NativePhysics(model, threads=0)
+    with pytest.raises(DpcError, match="mocap bodies"):
+        NativePhysics(spec.compile())
