@@ -50,6 +50,8 @@ bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_qp.py
 	$(BIN)/python experiments/bench_controller.py
 	$(BIN)/python experiments/bench_env.py
+	$(BIN)/python experiments/bench_engines.py
+	$(BIN)/python experiments/bench_deploy.py
 
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf

@@ -10,8 +10,20 @@ from dpc_mjx._version import __version__
 with _contextlib.redirect_stdout(_io.StringIO()):
     from mujoco import mjx  # noqa: F401
 
-from dpc_mjx import adapter, control, envs, io, robots, sac  # noqa: E402
+from dpc_mjx import adapter, control, deploy, envs, io, physics, robots, sac  # noqa: E402
 from dpc_mjx.envs import make  # noqa: E402
 from dpc_mjx.errors import DpcError  # noqa: E402
 
-__all__ = ["DpcError", "__version__", "adapter", "control", "envs", "io", "make", "robots", "sac"]
+__all__ = [
+    "DpcError",
+    "__version__",
+    "adapter",
+    "control",
+    "deploy",
+    "envs",
+    "io",
+    "make",
+    "physics",
+    "robots",
+    "sac",
+]

@@ -147,7 +147,9 @@ def update(
     """
     predicted = ob.predicted + (known_wrench(model, s, forces) + ob.estimate) * ob.elapsed
     estimate = config.gains() * (momentum(model, s) - predicted)
-    return ObserverState(predicted=predicted, estimate=estimate, elapsed=jp.full((), dt))
+    return ObserverState(
+        predicted=predicted, estimate=estimate, elapsed=jp.full((), dt, jp.float32)
+    )
 
 
 __all__ = ["ObserverConfig", "ObserverState", "init", "known_wrench", "momentum", "update"]
