@@ -24,12 +24,12 @@ from dpc_mjx.errors import DpcError
 TORQUE_TOL_MEDIAN = 0.1  # N·m, the median tick (measured ~0.05)
 TORQUE_TOL_MAX = 1.0  # N·m, every tick (the torques are tens of N·m)
 COMMAND = np.array([0.3, 0.0, 0.0])  # m/s forward
+ACCEL_STD = 0.05  # m/s^2, white noise of a MEMS accelerometer at 250 Hz (BMI088 class)
 
 
-def measure(dep: Deployment, data: mujoco.MjData, rng=None) -> Measurement:
+def measure(dep: Deployment, data: mujoco.MjData, errors: dict | None = None) -> Measurement:
     """What the robot's sensors read from the plant's `data` (after mj_forward): exact, or with
-    the documented white noise of `control/sensors.py` (and 0.05 m/s^2 on the accelerometer)
-    when `rng` is given."""
+    `errors` (`sensor_errors`) added."""
     lay = dep.env.lay
     rot = data.xmat[lay.trunk].reshape(3, 3)
     accel = rot.T @ (data.qacc[0:3] - np.array([0.0, 0.0, -9.81]))  # specific force, trunk
@@ -42,13 +42,29 @@ def measure(dep: Deployment, data: mujoco.MjData, rng=None) -> Measurement:
         "arm_q": data.qpos[lay.arm_qpos].copy(),
         "arm_qd": data.qvel[lay.arm_dof].copy(),
     }
-    if rng is not None:
-        m["gyro"] += rng.normal(0, sensors.GYRO[0], 3)
-        m["accel"] += rng.normal(0, 0.05, 3)
+    if errors is not None:
+        rng, bias = errors["rng"], errors["bias"]
+        tilt = bias["tilt"] + rng.normal(0, sensors.TILT[0], 2)  # rad, roll and pitch
+        for axis, angle in zip(np.eye(3)[:2], tilt, strict=True):  # quat * q_x(roll) * q_y(pitch)
+            turn = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
+            mujoco.mju_mulQuat(m["quat"], m["quat"].copy(), turn)
+        m["gyro"] += bias["gyro"] + rng.normal(0, sensors.GYRO[0], 3)
+        m["accel"] += rng.normal(0, ACCEL_STD, 3)
         m["leg_q"] += rng.normal(0, sensors.LEG_Q[0], 12)
         m["leg_qd"] += rng.normal(0, sensors.LEG_QD[0], 12)
     targets = data.ctrl[lay.arm_act].copy()
     return Measurement(**m, arm_targets=targets, command=COMMAND)
+
+
+def sensor_errors(seed: int) -> dict:
+    """The sensor model of `control/sensors.py` at scale 1 (an episode's attitude and gyro
+    biases, then white noise every tick), and accelerometer noise `ACCEL_STD`."""
+    rng = np.random.default_rng(seed)
+    bias = {
+        name: rng.uniform(-1, 1, n) * spec[1]
+        for name, n, spec in (("tilt", 2, sensors.TILT), ("gyro", 3, sensors.GYRO))
+    }
+    return {"rng": rng, "bias": bias}
 
 
 def plant(dep: Deployment) -> mujoco.MjData:
@@ -106,21 +122,24 @@ def test_torques_equal_the_env_controller(deployment):
 
 
 def test_estimator_keeps_the_robot_walking_with_noisy_sensors(deployment):
-    """2 s in MuJoCo C on the loop's own estimate (no base state given) with sensor noise: the
-    robot walks at the command and the estimate tracks the true velocity and height."""
+    """2 s in MuJoCo C on the loop's own estimate (no base state given) with the sensor model
+    (attitude and gyro bias and noise, encoder and accelerometer noise) and its one-tick delay
+    from measurement to torque: the robot walks at the command and the estimate tracks the true
+    velocity and height."""
     dep = deployment
     model, data = dep.env.model, plant(dep)
-    rng = np.random.default_rng(0)
-    dep.reset(measure(dep, data, rng), xy=data.qpos[:2])
+    errors = sensor_errors(seed=0)
+    dep.reset(measure(dep, data, errors), xy=data.qpos[:2])
     vel_err, height_err, speed = [], [], []
+    tau = data.ctrl[dep.env.lay.leg_act].copy()
     for tick in range(500):
-        tau = dep.step(measure(dep, data, rng))
+        data.ctrl[dep.env.lay.leg_act] = tau  # the torques of the previous tick's measurement
+        tau = dep.step(measure(dep, data, errors))
         if tick >= 125:  # after 0.5 s
             est = dep.state.est
             vel_err.append(np.asarray(est.velocity) - data.qvel[:3])
             height_err.append(float(est.position[2]) - data.qpos[2])
             speed.append(data.qvel[0])
-        data.ctrl[dep.env.lay.leg_act] = tau
         mujoco.mj_step(model, data)
         mujoco.mj_forward(model, data)
         assert data.qpos[2] > 0.15, f"fell at tick {tick}"
