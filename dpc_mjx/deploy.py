@@ -17,7 +17,8 @@ One tick:
     4. the low-level controller (`control/controller.py`, the env's instance): gait phase,
        Raibert footholds, the balance QP with u, swing PD, tau = J^T f
 
-Steps 2-4 are one jitted call at batch 1 (compiled by `reset`).
+Steps 2-4 are one jitted call at batch 1. The controller is that of the export's arm in the
+reaching env built with the export's options (`Deployment.env`; the env is only its vehicle).
 
 I/O contract (`Measurement`; frames: world z up, trunk x forward, y left):
 
@@ -162,7 +163,8 @@ class Deployment:
 
     def reset(self, m: Measurement, xy: tuple[float, float] = (0.0, 0.0)) -> None:
         """Start the loop: the robot standing still with its feet on the ground at `m`, its
-        trunk at `xy` (m, world; the estimator's origin). Compiles the tick on first use."""
+        trunk at `xy` (m, world; the estimator's origin). Checks the measurement's sizes (`step`
+        does not, to stay fast). The first `step`s compile the tick (~15 s, once per object)."""
         self._check(m)
         self.state = self._reset(self._inputs(m), jp.asarray(xy, jp.float32))
 
@@ -176,8 +178,10 @@ class Deployment:
         (m, m/s; motion capture, or a simulation's truth) replace the estimator's output."""
         if self.state is None:
             raise DpcError("Deployment.step before reset: call reset(measurement) first.")
+        if (base_position is None) != (base_velocity is None):
+            raise DpcError("Give both base_position and base_velocity, or neither (estimated).")
         x = self._inputs(m)
-        truth = base_position is not None and base_velocity is not None
+        truth = base_position is not None
         if truth:
             x["truth"] = np.concatenate([base_position, base_velocity]).astype(np.float32)
         policy_step = self.policy is not None and int(self.state.tick) % self.env.n_substeps == 0
@@ -188,6 +192,8 @@ class Deployment:
         n_arm, n_act = len(self.arm_joints), len(self.arm_actuators)
         sizes = {"quat": 4, "gyro": 3, "accel": 3, "leg_q": 12, "leg_qd": 12, "arm_q": n_arm}
         sizes |= {"arm_qd": n_arm, "arm_targets": n_act, "command": 3}
+        if m.contact is not None:
+            sizes["contact"] = 4
         for name, size in sizes.items():
             shape = np.shape(getattr(m, name))
             if shape != (size,):

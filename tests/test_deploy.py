@@ -159,6 +159,11 @@ def test_bad_input_is_refused(deployment):
     bad = Measurement(**{**m.__dict__, "leg_q": m.leg_q[:6]})
     with pytest.raises(DpcError, match=r"Measurement.leg_q must have shape \(12,\)"):
         deployment.reset(bad)
+    with pytest.raises(DpcError, match=r"Measurement.contact must have shape \(4,\)"):
+        deployment.reset(Measurement(**{**m.__dict__, "contact": np.ones(2)}))
+    deployment.reset(m)
+    with pytest.raises(DpcError, match="both base_position and base_velocity"):
+        deployment.step(m, base_position=data.qpos[:3])
     fresh = Deployment(controller="mbc")
     with pytest.raises(DpcError, match="before reset"):
         fresh.step(m)
