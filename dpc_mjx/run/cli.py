@@ -94,7 +94,7 @@ def _eval(args: argparse.Namespace) -> None:
         steps=args.steps,
         seed=args.seed,
         out=args.out,
-        csv=args.csv or _default_csv(args),
+        csv=args.csv or _default_csv(args, "native-" if args.engine == "native" else ""),
         env=_env_options(args),
     )
 

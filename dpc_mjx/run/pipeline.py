@@ -285,8 +285,10 @@ def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[C
 
 def _evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[CellResult]:
     """`eval.evaluate`, printing the table row by row, writing it to `out` (markdown) and every
-    episode to `csv` (`eval.write_episodes_csv`)."""
-    print(TABLE_HEADER, flush=True)
+    episode to `csv` (`eval.write_episodes_csv`). A line above the table names a native engine."""
+    engine = (kwargs.get("overrides") or {}).get("engine", "mjx")
+    preface = [] if engine == "mjx" else [f"physics: {engine} MuJoCo C (engine={engine!r})", ""]
+    print("\n".join([*preface, TABLE_HEADER]), flush=True)
 
     def show(cell: CellResult) -> None:
         print(table_row(cell), flush=True)
@@ -296,7 +298,7 @@ def _evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[
     if paired:
         print("\n" + "\n".join([PAIRED_HEADER, *paired]), flush=True)
     if out is not None:
-        lines = [TABLE_HEADER, *map(table_row, cells)]
+        lines = [*preface, TABLE_HEADER, *map(table_row, cells)]
         lines += ["", PAIRED_HEADER, *paired] if paired else []
         pathlib.Path(out).write_text("\n".join(lines) + "\n")
     if csv is not None:
