@@ -81,7 +81,7 @@ class NativePhysics:
         self.threads = threads
         self._datas = [mujoco.MjData(model) for _ in range(self.threads)]
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
-        template = mjx.make_data(mjx.put_model(model, impl="jax"))
+        template = mjx.make_data(model, impl="jax")
         # per env shapes and dtypes of the mjx.Data fields (xmat: (nbody, 3, 3) as in MJX)
         self._shapes = {k: getattr(template, k).shape for k in set(INPUTS) | set(OUTPUTS)}
         self._dtypes = {k: getattr(template, k).dtype for k in set(INPUTS) | set(OUTPUTS)}
