@@ -2,6 +2,8 @@
 mj_step / mj_forward; an unstable step comes back as NaN; under the env, MJX and MuJoCo C agree
 on a short episode (the engines' contact models differ, so only to a tolerance)."""
 
+import json
+import pathlib
 from csv import DictReader
 
 import jax
@@ -18,12 +20,13 @@ from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import OUTPUTS, NativePhysics, make_physics
 from dpc_mjx.robots import build
 from dpc_mjx.run.cli import main
+from dpc_mjx.run.eval import evaluate
 
 # float32 round trip of the inputs and outputs (the env's dtype) against MuJoCo in float64
 FLOAT32_TOL = 1e-5
-# MJX vs MuJoCo C, the same episode, 0.2 s (10 env steps): their contact solvers differ, so the
-# robots drift apart by ~1e-3 rad and the returns by ~1e-4 of their value; a wrong field or frame
-# would tip the robot over or change the return by far more.
+# MJX vs MuJoCo C, the same episode, 0.2-2 s: their contact solvers differ, so the robots drift
+# apart by ~1e-3 rad and the returns by ~1e-4 of their value; a wrong field or frame would tip
+# the robot over or change the return by far more.
 ENGINE_RETURN_TOL = 0.01  # relative
 
 
@@ -90,6 +93,31 @@ def test_unstable_step_comes_back_as_nan(model, monkeypatch, tmp_path):
     assert np.all(np.isnan(np.asarray(out.qvel)))
 
 
+def test_native_engine_reproduces_the_mjx_recording():
+    """The reaching env (MBC, exact sensors) under MuJoCo C, 4 episodes of 2 s from seed 4242:
+    the episodes of the MJX recording `tests/data/eval_regression.json` (test_eval_regression),
+    to the engines' contact differences (`ENGINE_RETURN_TOL`), and not bit for bit."""
+    recording = json.loads(
+        (pathlib.Path(__file__).parent / "data" / "eval_regression.json").read_text()
+    )
+    assert (recording["seed"], recording["episodes"], recording["steps"]) == (4242, 4, 100)
+    mbc = recording["per_episode"]["mbc"]
+    overrides = {"sensor_noise": 0.0, "sensor_delay": 0, "engine": "native"}
+    (cell,) = evaluate(["regular"], ["mbc"], episodes=4, steps=100, seed=4242, overrides=overrides)
+    ret = cell.per_episode["return"]
+    np.testing.assert_allclose(ret, mbc["return"], rtol=ENGINE_RETURN_TOL)
+    assert np.all(cell.per_episode["fell"] == np.asarray(mbc["fell"], bool))
+    assert not np.array_equal(ret, np.asarray(mbc["return"], np.float32))  # another engine
+
+
+def test_engine_flags_that_contradict_each_other_fail_before_anything_runs(capsys):
+    assert main(["eval", "--engine", "native", "--env", "engine=mjx"]) == 2
+    assert "--engine native and --env engine=mjx disagree" in capsys.readouterr().err
+    assert main(["sim2sim", "--env", "engine=native"]) == 2
+    assert "sim2sim runs both engines itself" in capsys.readouterr().err
+
+
+@pytest.mark.slow
 def test_sim2sim_runs_both_engines_on_the_same_episodes(monkeypatch, tmp_path, capsys):
     """`dpc-mjx sim2sim` (MBC, exact sensors, 2 episodes of 0.2 s): both engines' rows, the
     paired native - MJX row, and per episode the same robot under both engines, to their
