@@ -85,18 +85,16 @@ def _transfer(args: argparse.Namespace) -> None:
 def _eval(args: argparse.Namespace) -> None:
     from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
 
-    evaluate_export(
-        args.export or SHIPPED,
-        arms=args.arms,
-        controllers=args.controllers,
-        task=args.task,
-        episodes=args.episodes,
-        steps=args.steps,
-        seed=args.seed,
-        out=args.out,
-        csv=args.csv or _default_csv(args, "native-" if args.engine == "native" else ""),
-        env=_env_options(args),
-    )
+    prefix = "native-" if args.engine == "native" else ""
+    evaluate_export(args.export or SHIPPED, **_cells(args, prefix), env=_env_options(args))
+
+
+def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
+    """The keyword arguments that `eval` and `sim2sim` share (`eval_options`), CSV defaulted."""
+    names = ("arms", "controllers", "task", "episodes", "steps", "seed", "out")
+    return {k: getattr(args, k) for k in names} | {
+        "csv": args.csv or _default_csv(args, csv_prefix)
+    }
 
 
 def _env_options(args: argparse.Namespace) -> dict:
@@ -113,18 +111,7 @@ def _sim2sim(args: argparse.Namespace) -> None:
     from dpc_mjx.run.pipeline import SHIPPED
     from dpc_mjx.run.sim2sim import sim2sim
 
-    sim2sim(
-        args.export or SHIPPED,
-        arms=args.arms,
-        controllers=args.controllers,
-        task=args.task,
-        episodes=args.episodes,
-        steps=args.steps,
-        seed=args.seed,
-        env=_parse_sets(args.env),
-        out=args.out,
-        csv=args.csv or _default_csv(args, "sim2sim-"),
-    )
+    sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=_parse_sets(args.env))
 
 
 def _render(args: argparse.Namespace) -> None:
