@@ -31,12 +31,28 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jp
+import numpy as np
 from flax import struct
 
 from dpc_mjx.robots.a1 import FOOT_RADIUS
 
 GRAVITY = jp.array([0.0, 0.0, -9.81])  # m/s^2, world
 N_STATE = 18
+
+
+def _measurement_matrix() -> np.ndarray:
+    """(28, 18) H of the measurements [foot_i - p (12), v (12), foot_i,z (4)] on the state."""
+    h = np.zeros((28, N_STATE), np.float32)
+    for i in range(4):
+        rows = slice(3 * i, 3 * i + 3)
+        h[rows, 0:3] = -np.eye(3)  # foot_i - p
+        h[rows, 6 + 3 * i : 9 + 3 * i] = np.eye(3)
+        h[12 + 3 * i : 15 + 3 * i, 3:6] = np.eye(3)  # v
+        h[24 + i, 6 + 3 * i + 2] = 1.0  # foot_i,z
+    return h
+
+
+_MEASUREMENT = _measurement_matrix()  # constant: built once, not in every traced update
 
 
 @struct.dataclass
@@ -109,15 +125,7 @@ def update(
     cov = f @ est.cov @ f.T + jp.diag(q_diag)
 
     # Correct: rows [foot_i - p (12), v (12), foot_i,z (4)].
-    h_rel = jp.zeros((12, N_STATE))
-    h_vel = jp.zeros((12, N_STATE))
-    h_z = jp.zeros((4, N_STATE))
-    for i in range(4):
-        rows = slice(3 * i, 3 * i + 3)
-        h_rel = h_rel.at[rows, 0:3].set(-eye3).at[rows, 6 + 3 * i : 9 + 3 * i].set(eye3)
-        h_vel = h_vel.at[rows, 3:6].set(eye3)
-        h_z = h_z.at[i, 6 + 3 * i + 2].set(1.0)
-    h = jp.concatenate([h_rel, h_vel, h_z])  # (28, 18)
+    h = jp.asarray(_MEASUREMENT)
     y = jp.concatenate([foot_rel.reshape(-1), -foot_rel_vel.reshape(-1), jp.full(4, FOOT_RADIUS)])
     r_diag = jp.concatenate(
         [
