@@ -12,7 +12,7 @@ from dpc_mjx.run.config import RunConfig, read_run_config, recipe, start_run, tu
 from dpc_mjx.run.pipeline import SHIPPED, SHIPPED_PAPER
 from dpc_mjx.sac import SacConfig
 
-TRANSFERRED = ("longer", "heavier", "double", "so100", "z1")  # docs/results.md, "Transfer"
+TRANSFERRED = ("longer", "heavier", "double", "so100", "z1", "pusher")  # docs/results.md
 
 
 def test_run_config_takes_dotted_overrides_and_round_trips_through_json(tmp_path):

@@ -1,15 +1,15 @@
 """The object tasks (pushing, carrying, lifting) as DPC envs: every task with its default arm and
-the paper's alternates resets and steps finitely, the scripts do what they say (the box moves, the
-weld grasps and releases the ball on the target table, the lifted ball stays in the gripper), and
-unsuitable arms fail before anything is built (batch 2).
+the paper's alternates resets and steps finitely, the scripts do what they say on the nominal
+episode (the box moves, the weld grasps and releases the ball on the target table, the lifted
+ball stays in the gripper), and unsuitable arms fail before anything is built (batch 2).
 
 Compile time dominates (30-70 s per env on a busy 2-core CPU), so every env is compiled once
 (module-scoped fixtures), mostly with XLA's backend optimisation off (`FAST_COMPILE`: about 40%
 shorter compiles but ~10x slower steps; a test-only choice, not used for carrying's 450 steps).
 The pushing, carrying and lifting envs with their default arms go through `wrap_for_training`
 (and are traced once); `carrying_high` and the alternates through one jitted reset + two steps
-each (marked slow, with tests/test_matrix.py: `make test-all`); reaching with `longer` and
-`heavier` (the structure of `regular`, which test_envs.py steps) through a jitted reset only.
+each, and reaching with `longer` and `heavier` (the structure of `regular`, which test_envs.py
+steps) through a jitted reset only (all marked slow, with tests/test_matrix.py: `make test-all`).
 """
 
 import functools
@@ -41,8 +41,17 @@ _STEPPED = [  # (task, arm) reset + two steps (reaching's regular, none, double:
     ("lifting", "heavier"),
 ]
 _RESET_ONLY = [("reaching", "longer"), ("reaching", "heavier")]
+# The scripts' mechanics are checked on each task's nominal episode: no pushes, no added
+# weight, the script at its own pace, the box at its place, the command at its middle (the
+# draws around it: tests/test_task_episodes.py).
+_NOMINAL = {"push_force": (0.0, 0.0), "object_mass": (0.0, 0.0), "script_rate": (1.0, 1.0)}
+_NOMINAL_TASK = {
+    "pushing": {"command_vx": (0.2, 0.2), "box_jitter": (0.0, 0.0, 0.0)},
+    "carrying": {},
+    "lifting": {"command_vx": (0.3, 0.3), "lift_gain": (1.0, 1.0)},
+}
 _TASK_METRICS = {
-    "pushing": {"box_dx", "box_target_dist"},
+    "pushing": {"box_dx", "box_turn", "box_target_dist"},
     "carrying": {"ball_target_dist", "ball_on_target", "grasped"},
     "carrying_high": {"ball_target_dist", "ball_on_target", "grasped"},
     "lifting": {"ball_gap"},
@@ -69,7 +78,8 @@ class _Wrapped:
     """A default-arm env behind the training wrappers: jitted reset and step, three steps."""
 
     def __init__(self, task: str):
-        self.env = dpc_mjx.make(f"a1_arm/{task}")  # no arm: the task's default
+        # no arm: the task's default; its nominal episode
+        self.env = dpc_mjx.make(f"a1_arm/{task}", **_NOMINAL, **_NOMINAL_TASK[task])
         self.counted = CountTraces(self.env)
         wrapped = wrap_for_training(self.counted)
         options = None if task == "carrying" else FAST_COMPILE  # carrying runs 450 steps
@@ -143,6 +153,7 @@ def test_other_arms_reset_and_step(task, arm):
         assert len(env.props.balls) == len(env.props.welds) == 2
 
 
+@pytest.mark.slow  # ~35 s of compile each; `make test-all`
 @pytest.mark.parametrize("task, arm", _RESET_ONLY, ids=[f"{t}-{a}" for t, a in _RESET_ONLY])
 def test_reaching_arms_reset(task, arm):
     env = dpc_mjx.make(f"a1_arm/{task}", arm=arm)
@@ -244,6 +255,15 @@ def test_unsuitable_arms_fail_before_anything_is_built(monkeypatch):
             dpc_mjx.make("a1_arm/carrying", grasp_threshold=0.0)
         with pytest.raises(DpcError, match="command_after"):
             dpc_mjx.make("a1_arm/lifting", command_after=(0.3, 0.0))
+        for task, option, value in (  # each episode's draws: ranges that cannot be
+            ("pushing", "box_jitter", (0.2, 0.0, 0.0)),  # the plate would miss the box
+            ("pushing", "box_jitter", (0.05, 0.03)),
+            ("lifting", "lift_gain", (0.5, 2.0)),
+            ("carrying", "object_mass", (-0.5, 0.5)),
+            ("carrying", "script_rate", (0.0, 1.0)),
+        ):
+            with pytest.raises(DpcError, match=option):
+                dpc_mjx.make(f"a1_arm/{task}", **{option: value})
     assert compiles == []
 
 
@@ -259,7 +279,7 @@ def test_registry_names_and_configs():
         assert registry.default_arm(f"a1_arm/{task}") == arm
     cfg = registry.get_config("a1_arm/carrying_high", grasp_threshold=0.02)
     assert isinstance(cfg, carrying.CarryingConfig) and cfg.grasp_threshold == 0.02
-    assert registry.get_config("a1_arm/pushing").push_force == (0.0, 0.0)  # contact force only
+    assert registry.get_config("a1_arm/pushing").push_force == pushing.PUSHES
 
 
 def test_the_controller_models_the_bare_a1_on_every_scene():

@@ -30,10 +30,14 @@ Tasks customise the env through hooks, never by rewriting `step`:
 
     build_model(arm)        the compiled scene (objects: the task's `scene_spec(arm)`)
     check_arm(robot)        raise `DpcError` for an arm the task cannot use (before any compile)
+    draw_task(key)          (m,) this episode's own task draws (script pace, object placement),
+                            kept in `Disturbances.task`
+    place_objects(qpos, dist) the initial qpos with the scene's objects placed (pushing: the box)
     arm_targets(dist, t, d) (n_act,) arm servo targets at physics time t: the reference motion
                             p_arm (reaching: the sampler's random targets; tasks: scripts)
-    task_physics(d, t)      edits the data before each physics step (carrying: grasp welds)
-    task_metrics(d)         extra per-step metrics (scalars, the same keys at reset and step)
+    task_physics(d, t, dist) edits the data before each physics step (carrying: grasp welds)
+    task_metrics(d, dist)   extra per-step metrics (scalars, the same keys at reset and step):
+                            the task's success measures (`TASK_MEASURES` says how each is read)
 
 Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`control.state.has_fallen`). A
 non-finite or exploded step (|qvel| > `explode_speed`) keeps the previous physics and controller
@@ -78,6 +82,8 @@ METRICS = (
     "yaw_rate_sq_err",  # (rad/s)^2
     "roll_sq",  # rad^2
     "pitch_sq",  # rad^2
+    "pos_sq_err",  # m^2, trunk (x, y) minus the desired path (`Disturbances.ref_pose`)
+    "ee_sq_err",  # m^2, end-effector tracking error, first order, mean over arms (`_ee_sq_err`)
 )
 _GAITS = {"trot": gait.trot, "stand": gait.stand}
 
@@ -101,15 +107,22 @@ class DpcEnv(Env):
         self.mx = sim.put_model(self.model)
         self.physics = make_physics(config.engine, self.model, self.mx)
         self.controller = make_controller(self.model, gait_=_GAITS[config.gait]())
-        self.sampler = make_sampler(config, self.model, self.lay)
-        self.obs_layout = observations.ObsLayout.of(self.lay)
         self.props = prop_layout(self.model)
+        self.sampler = make_sampler(config, self.model, self.lay, len(self.props.objects))
+        self.obs_layout = observations.ObsLayout.of(self.lay)
         self._object_bodies = np.array([o.body for o in self.props.objects], int)
         self._ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
         self._ee_bodies = self.model.site_bodyid[self._ee_sites]
+        # each arm's servo targets (columns of p_arm) and joints, in the same order
+        cols = np.cumsum([0] + [len(a.act) for a in self.lay.arms])
+        self._arm_cols = [np.arange(cols[k], cols[k + 1]) for k in range(len(self.lay.arms))]
         self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
 
     # task hooks -----------------------------------------------------------------------------
+
+    # How `dpc_mjx.run.eval` reads each `task_metrics` key: its value at the episode's end
+    # (its last step, or the fall), averaged over episodes. Tasks name theirs.
+    TASK_MEASURES: tuple[str, ...] = ()
 
     def build_model(self, arm: str | Arm | RobotSpec) -> mujoco.MjModel:
         """The compiled scene; tasks with objects override this (add bodies with MjSpec)."""
@@ -128,16 +141,28 @@ class DpcEnv(Env):
         del d
         return self.sampler.arm_targets(dist, t)
 
-    def task_physics(self, d: mjx.Data, t: jax.Array) -> mjx.Data:
+    def draw_task(self, key: jax.Array) -> jax.Array:
+        """(m,) the episode's own draws of the task (script pace, object placement), from the
+        config's ranges; stored in `Disturbances.task`. Reaching: none."""
+        del key
+        return jp.zeros(0)
+
+    def place_objects(self, qpos: jax.Array, dist: Disturbances) -> jax.Array:
+        """(nq,) the initial qpos (home key, leg noise) with the scene's objects placed for this
+        episode (`dist.task`). Default: as in the home key."""
+        del dist
+        return qpos
+
+    def task_physics(self, d: mjx.Data, t: jax.Array, dist: Disturbances) -> mjx.Data:
         """The data handed to the physics step at physics time t (s), after the controller set
         `ctrl` and `xfrc_applied`: tasks switch grasp welds here. Pure, jit-safe."""
-        del t
+        del t, dist
         return d
 
-    def task_metrics(self, d: mjx.Data) -> dict[str, jax.Array]:
+    def task_metrics(self, d: mjx.Data, dist: Disturbances) -> dict[str, jax.Array]:
         """Per-step task metrics (scalars) merged into `state.metrics`, from the data after the
         step (at reset: the initial data). Keys must not depend on the data."""
-        del d
+        del d, dist
         return {}
 
     # brax Env API ---------------------------------------------------------------------------
@@ -171,6 +196,8 @@ class DpcEnv(Env):
         )
         qpos = qpos.at[lay.leg_qpos].add(noise)
         dist = self.sampler.init(k_dist)
+        dist = dist.replace(task=self.draw_task(jax.random.fold_in(k_dist, 2)))  # own stream
+        qpos = self.place_objects(qpos, dist)
         ctrl = jp.asarray(model.key_ctrl[0], jp.float32)
         d = mjx.make_data(self.mx).replace(qpos=qpos, ctrl=ctrl)
         d = self.physics.forward(d)
@@ -190,7 +217,7 @@ class DpcEnv(Env):
             "ctrl_queue": jp.tile(d.ctrl, (cfg.sensor_delay, 1)),  # (delay, nu) not yet applied
             **self._objects(d),
         }
-        metrics = {k: jp.zeros(()) for k in METRICS} | self.task_metrics(d)
+        metrics = {k: jp.zeros(()) for k in METRICS} | self.task_metrics(d, dist)
         obs = observations.observation(lay, d, dist.command, info["ctrl"].observer.estimate)
         obs = self._measured(obs, bias)
         return State(d, obs, jp.zeros(()), jp.zeros(()), metrics, info)
@@ -217,7 +244,8 @@ class DpcEnv(Env):
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
             xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
-            d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time)
+            xfrc = xfrc.at[self._object_bodies, :3].add(self.sampler.object_forces(dist))
+            d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time, dist)
             d = self.physics.step(d)
             return (d, cs, queue, bias if noise is None else noise), None
 
@@ -248,7 +276,9 @@ class DpcEnv(Env):
             "yaw_rate_sq_err": err[2] ** 2,
             "roll_sq": sb[0] ** 2,
             "pitch_sq": sb[1] ** 2,
-            **self.task_metrics(d),
+            "pos_sq_err": jp.sum((d.qpos[:2] - dist.ref_pose[:2]) ** 2),
+            "ee_sq_err": self._ee_sq_err(d, self.arm_targets(dist, d.time, d)),
+            **self.task_metrics(d, dist),
         }
         new_metrics = {  # a bad step reports 0 for every term but `nan_resets`
             k: jp.where(bad & (k != "nan_resets"), 0.0, v) for k, v in new_metrics.items()
@@ -338,6 +368,21 @@ class DpcEnv(Env):
         lever = d.site_xpos[self._ee_sites] - d.xipos[self._ee_bodies]
         wrench = jp.concatenate([forces, jp.cross(lever, forces)], axis=1)
         return xfrc.at[self._ee_bodies].add(wrench)
+
+    def _ee_sq_err(self, d, targets: jax.Array) -> jax.Array:
+        """() m^2: the squared distance of each end effector (`ee` site) from where the servo
+        targets `targets` (n_act,) would put it, to first order, |J_arm (p_arm - q_arm)|^2 with
+        J_arm the site's position Jacobian (world) over the arm's joints, mean over arms; 0
+        without arms. (The servos' tracking error in joint space, seen at the end effector.)"""
+        if not len(self._ee_sites):
+            return jp.zeros(())
+        errs = []
+        for k, arm in enumerate(self.lay.arms):
+            site = self._ee_sites[k]
+            jacp, _ = mjx.jac(self.mx, d, d.site_xpos[site], self._ee_bodies[k])  # (nv, 3)
+            dq = targets[self._arm_cols[k]] - d.qpos[arm.qpos]  # (n_k,) rad (m for a finger)
+            errs.append(jp.sum((dq @ jacp[arm.dof]) ** 2))
+        return jp.mean(jp.stack(errs))
 
     def _privileged(self, d, dist) -> jax.Array:
         """(10,) [u_oracle (6), payload (1), ee push force (3)], see `observations.PRIVILEGED`."""

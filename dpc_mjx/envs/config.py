@@ -95,6 +95,14 @@ class EnvConfig:
     # constant downward force m g at the `ee` site (the model's masses are not changed).
     payload_mass: tuple[float, float] = (0.0, 0.3)
 
+    # Object tasks (scenes with a box or balls; reaching has none, and ignores both):
+    # weight added to each free object for the episode, mass ~ U(object_mass) kg, a constant
+    # downward force m g at the object's COM (its inertia is not changed), so a held ball loads
+    # the arm and a box presses harder on the floor;
+    object_mass: tuple[float, float] = (0.0, 0.0)
+    # the pace of the scripted arm motion: its time runs ~ U(script_rate) times as fast.
+    script_rate: tuple[float, float] = (1.0, 1.0)
+
     @property
     def u_scale(self) -> tuple[float, ...]:
         """(6,) N, N, N, N·m, N·m, N·m: u = u_scale * a for an action a in [-1, 1]^6."""
@@ -140,9 +148,9 @@ class EnvConfig:
                 )
             for v in self.command_after:
                 _number("command_after", v)
-        for name in ("command_switch", "push_force", "push_gap", "payload_mass"):
+        for name in ("command_switch", "push_force", "push_gap", "payload_mass", "object_mass"):
             _range(name, getattr(self, name), low=0.0)
-        for name in ("reach_period", "push_duration"):
+        for name in ("reach_period", "push_duration", "script_rate"):
             _range(name, getattr(self, name), low=1e-3)
         w = self.push_axis_weights
         if not (isinstance(w, tuple) and len(w) == 3):

@@ -1,5 +1,7 @@
 """Per-episode randomness of a DPC env: velocity commands, arm reference motions, end-effector
-pushes and payloads. Sampled per env from its own key; distributions are the `EnvConfig` fields.
+pushes, payloads and the weight added to a scene's objects; and the desired body path (the
+command integrated from the start pose). Sampled per env from its own key; distributions are the
+`EnvConfig` fields; a task's own draws (script timing, object placement) are its `draw_task`.
 
 The schedule is a small Markov state (`Disturbances`) advanced once per env step (`advance`, at
 50 Hz), and evaluated at any physics time t inside the step (`arm_targets`, `ee_forces`), so
@@ -37,6 +39,9 @@ class Disturbances:
     push_on: jax.Array  # (k,) s, push start
     push_off: jax.Array  # (k,) s, push end
     payload: jax.Array  # (k,) kg held by each gripper
+    object_load: jax.Array  # (n_obj,) kg, weight added to each free object of the scene
+    ref_pose: jax.Array  # (3,) desired x, y (m, world) and heading (rad): the command integrated
+    task: jax.Array  # (m,) the task's own draws (`DpcEnv.draw_task`; reaching: none)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +53,8 @@ class DisturbanceSampler:
     reach_low: np.ndarray  # (n,) lower bound of reaching targets
     reach_high: np.ndarray  # (n,)
     n_arms: int
+    n_objects: int  # free objects of the scene (box, balls)
+    start_pose: np.ndarray  # (3,) x, y (m, world), heading (rad) of the trunk at reset
 
     def init(self, key: jax.Array) -> Disturbances:
         """The schedule at t = 0: a command, a first arm target, a first push per arm."""
@@ -66,12 +73,18 @@ class DisturbanceSampler:
             push_on=jp.full(self.n_arms, NEVER),
             push_off=jp.zeros(self.n_arms),  # the "previous push" ended at t = 0
             payload=_uniform(k_mass, cfg.payload_mass, (self.n_arms,)),  # kg ~ U(payload_mass)
+            # kg ~ U(object_mass); a key of its own, so the draws above stay those of the envs
+            # before objects had weights
+            object_load=_uniform(jax.random.fold_in(key, 1), cfg.object_mass, (self.n_objects,)),
+            ref_pose=jp.asarray(self.start_pose, jp.float32),
+            task=jp.zeros(0),
         )
         d = self._new_target(d, zero, k_ref)
         return self._new_pushes(d, zero, k_push)
 
     def advance(self, d: Disturbances, t: jax.Array, key: jax.Array) -> Disturbances:
-        """Redraw whatever is due at time t (s): command, arm target, pushes that have ended."""
+        """Redraw whatever is due at time t (s): command, arm target, pushes that have ended;
+        then move the desired pose on by one env step (`policy_dt`) at the command."""
         k_cmd, k_ref, k_push = jax.random.split(key, 3)
         switch = t >= d.command_switch
         after = self.config.command_after
@@ -82,7 +95,8 @@ class DisturbanceSampler:
         )
         due = t >= d.ref_next
         d = jax.tree.map(lambda a, b: jp.where(due, a, b), self._new_target(d, t, k_ref), d)
-        return self._new_pushes(d, t, k_push)
+        d = self._new_pushes(d, t, k_push)
+        return d.replace(ref_pose=integrate_command(d.ref_pose, d.command, self.config.policy_dt))
 
     def arm_targets(self, d: Disturbances, t: jax.Array) -> jax.Array:
         """(n,) arm servo targets at time t: smooth step from `ref_start` to `ref_goal`."""
@@ -104,6 +118,10 @@ class DisturbanceSampler:
         """(k, 3) N, world: push + payload weight on each end effector at time t."""
         weight = jp.zeros((self.n_arms, 3)).at[:, 2].set(-GRAVITY * d.payload)
         return self.pushes(d, t, yaw) + weight
+
+    def object_forces(self, d: Disturbances) -> jax.Array:
+        """(n_obj, 3) N, world: the added weight of each free object (at its COM)."""
+        return jp.zeros((self.n_objects, 3)).at[:, 2].set(-GRAVITY * d.object_load)
 
     def _command(self, key: jax.Array) -> jax.Array:
         cfg = self.config
@@ -141,8 +159,21 @@ class DisturbanceSampler:
         )
 
 
-def make_sampler(config: EnvConfig, model: mujoco.MjModel, lay: Layout) -> DisturbanceSampler:
-    """Sampling bounds from the model: reaching targets within the arm joints' ranges."""
+def integrate_command(pose: jax.Array, command: jax.Array, dt: float) -> jax.Array:
+    """(3,) the desired pose [x, y (m, world), heading (rad)] after `dt` s at `command` (3,)
+    [v_x, v_y (m/s, yaw frame), yaw rate (rad/s)] (explicit Euler: the velocity turned by the
+    heading at the start of the step)."""
+    c, s = jp.cos(pose[2]), jp.sin(pose[2])
+    vx, vy, wz = command
+    return pose + dt * jp.array([c * vx - s * vy, s * vx + c * vy, wz])
+
+
+def make_sampler(
+    config: EnvConfig, model: mujoco.MjModel, lay: Layout, n_objects: int = 0
+) -> DisturbanceSampler:
+    """Sampling bounds from the model: reaching targets within the arm joints' ranges; the
+    desired path starts at the home key's trunk position, heading 0 (the key is level and
+    faces +x)."""
     home = np.asarray(model.key_ctrl[0][lay.arm_act], np.float32)
     joints = model.actuator_trnid[lay.arm_act, 0]
     limited = model.jnt_limited[joints].astype(bool)
@@ -151,7 +182,8 @@ def make_sampler(config: EnvConfig, model: mujoco.MjModel, lay: Layout) -> Distu
     f = config.reach_fraction
     reach_low = np.clip(home - f * (home - lo), lo, hi).astype(np.float32)
     reach_high = np.clip(home + f * (hi - home), lo, hi).astype(np.float32)
-    return DisturbanceSampler(config, home, reach_low, reach_high, len(lay.arms))
+    start = np.array([*model.key_qpos[0][:2], 0.0], np.float32)
+    return DisturbanceSampler(config, home, reach_low, reach_high, len(lay.arms), n_objects, start)
 
 
 def _uniform(key: jax.Array, bounds: tuple[float, float], shape: tuple = ()) -> jax.Array:

@@ -14,10 +14,11 @@ benchmarks (`make_chunk`). Three layers:
                                       trajectory figures)
 
 A tally is per env and ends at the env's first done (fall or NaN reset): its return is the sum of
-rewards up to and including the done step (so a fall's penalty counts once), and its error sums
-run over the steps before the done ("measured" steps), for RMS values. `step` is a batched step
-(`jax.vmap(env.step)`, or a `wrap_for_training` env whose auto-reset keeps the batch running
-after a done; the tally still ends at the first done).
+rewards up to and including the done step (so a fall's penalty counts once), its error sums
+run over the steps before the done ("measured" steps), for RMS values, and it keeps the task's
+success measures (`DpcEnv.TASK_MEASURES`) as they were at the episode's end. `step` is a
+batched step (`jax.vmap(env.step)`, or a `wrap_for_training` env whose auto-reset keeps the
+batch running after a done; the tally still ends at the first done).
 """
 
 from __future__ import annotations
@@ -39,7 +40,10 @@ Step = Callable[[State, jax.Array], State]  # batched: (state (B, ...), action (
 # (state before the step, state after) -> a pytree of per-step values, each (B, ...)
 Record = Callable[[State, State], Any]
 # Env metrics summed over the measured steps (squared errors: rad^2, (m/s)^2, (rad/s)^2).
-ERROR_SUMS = ("roll_sq", "pitch_sq", "vx_sq_err", "vy_sq_err", "yaw_rate_sq_err")
+ERROR_SUMS = (
+    *("roll_sq", "pitch_sq", "vx_sq_err", "vy_sq_err", "yaw_rate_sq_err"),
+    *("pos_sq_err", "ee_sq_err"),  # m^2: the desired path, the end effector's targets
+)
 
 
 def zero_policy(obs: jax.Array, key: jax.Array) -> jax.Array:
@@ -59,11 +63,13 @@ class Tally:
     ended: jax.Array  # 1 once done
     measured: jax.Array  # steps before the done (those of the error sums)
     errors: dict[str, jax.Array]  # `ERROR_SUMS` over the measured steps
+    final: dict[str, jax.Array]  # the named metrics at the last step counted (the end)
 
     @classmethod
-    def zeros(cls, batch: int) -> Tally:
+    def zeros(cls, batch: int, final: tuple[str, ...] = ()) -> Tally:
+        """A zero tally of `batch` envs keeping the metrics `final` at each episode's end."""
         z = jp.zeros(batch)
-        return cls(z, z, z, z, z, z, dict.fromkeys(ERROR_SUMS, z))
+        return cls(z, z, z, z, z, z, dict.fromkeys(ERROR_SUMS, z), dict.fromkeys(final, z))
 
     def add(self, state: State) -> Tally:
         """The tally after `state` (the step just taken)."""
@@ -78,6 +84,7 @@ class Tally:
             ended=jp.maximum(self.ended, live * state.done),
             measured=self.measured + counted,
             errors={k: v + counted * m[k] for k, v in self.errors.items()},
+            final={k: jp.where(live > 0, m[k], v) for k, v in self.final.items()},
         )
 
 
@@ -113,11 +120,11 @@ def make_chunk(step: Step, policy: Policy, chunk: int, record: Record | None = N
 
 
 def start(env: Env, batch: int, seed: int) -> tuple[Carry, jax.Array]:
-    """The batch reset from `seed` (env i from the i-th key of one split) with a zero tally,
-    and the key that the chunks continue from."""
+    """The batch reset from `seed` (env i from the i-th key of one split) with a zero tally
+    (keeping the env's `TASK_MEASURES`), and the key that the chunks continue from."""
     key, k_reset = jax.random.split(jax.random.PRNGKey(seed))
     state = jax.jit(jax.vmap(env.reset))(jax.random.split(k_reset, batch))
-    return (state, Tally.zeros(batch)), key
+    return (state, Tally.zeros(batch, getattr(env, "TASK_MEASURES", ()))), key
 
 
 def chunks(run_chunk: Callable, carry: Carry, key: jax.Array) -> Iterator[tuple[Carry, Any]]:
@@ -154,8 +161,9 @@ def run_episodes(
 ) -> dict[str, np.ndarray]:
     """Run `episodes` envs (one batch, no auto-reset) for `steps` env steps; per-episode arrays
     (episodes,): 'return', 'fell' (bool), 'nan' (bool), 'length' (steps until done,
-    inclusive), 'measured' (steps before the done) and the `ERROR_SUMS` over the measured
-    steps. Steps run in jitted chunks of the largest divisor of `steps` not above `chunk`."""
+    inclusive), 'measured' (steps before the done), the `ERROR_SUMS` over the measured
+    steps and the env's `TASK_MEASURES` at each episode's end. Steps run in jitted chunks of
+    the largest divisor of `steps` not above `chunk`."""
     if episodes < 1 or steps < 1 or chunk < 1:
         raise DpcError(
             f"run_episodes needs episodes, steps and chunk >= 1, got {episodes}, {steps}, {chunk}."
@@ -174,4 +182,5 @@ def run_episodes(
         "nan": np.asarray(t.nan) > 0,
         "measured": np.asarray(t.measured),
         **{k: np.asarray(v) for k, v in t.errors.items()},
+        **{k: np.asarray(v) for k, v in t.final.items()},
     }

@@ -240,7 +240,12 @@ def _parser() -> argparse.ArgumentParser:
         )
         p.add_argument("--task", default="a1_arm/reaching")
         p.add_argument("--episodes", type=int, default=64)
-        p.add_argument("--steps", type=int, default=1000, help="env steps of 20 ms per episode")
+        p.add_argument(
+            "--steps",
+            type=int,
+            help="env steps of 20 ms per episode (default: the task's episode length; "
+            "reaching 1000 = 20 s, pushing 500, carrying 650, lifting 1000)",
+        )
         p.add_argument("--seed", type=int, default=1000)
         p.add_argument("--out", help="also write the table to this markdown file")
         p.add_argument(

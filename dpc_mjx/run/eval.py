@@ -7,7 +7,10 @@ for `steps` env steps of 20 ms without auto-reset; an episode ends at its first 
 reset) and its return is the sum of the paper's rewards (eq. 4) up to and including that step,
 the fall penalty included. Reported per cell: fall rate with a 95% Wilson interval, mean return
 with a 95% normal interval, RMS roll and pitch (rad), RMSE of forward and lateral speed (m/s) and
-of the yaw rate (rad/s) over the steps before a fall, NaN resets, wall time.
+of the yaw rate (rad/s) over the steps before a fall, NaN resets, wall time; and the task's
+measures (`TASK_HEADER`): RMS distance from the desired path (m) and the end effector's RMS
+tracking error (m) over the same steps, and the task's success measures at each episode's end
+(`DpcEnv.TASK_MEASURES`), each a mean with a 95% normal interval.
 
 Controllers: 'mbc' (u = 0), 'observer' (u = the momentum observer's estimate, no training, no
 force sensor), 'oracle' (u = the measured arm-mount wrench) and 'dpc' (u from the trained policy
@@ -53,6 +56,10 @@ class CellResult:
     nan_resets: int
     seconds: float  # wall time, compile included
     seed: int = 0  # episode i is reset from the i-th key of `seed` (`rollout.start`)
+    pos_rmse: float = 0.0  # m, trunk (x, y) vs the desired path (the command integrated)
+    ee_rmse: float = 0.0  # m, end effector vs its servo targets (first order, `DpcEnv`)
+    # the task's success measures at the episodes' end: name -> (mean, 95% CI low, high)
+    task: dict = dataclasses.field(default_factory=dict)
     # per-episode arrays of `rollout.run_episodes` (episodes,), for `write_episodes_csv`
     per_episode: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
@@ -105,6 +112,9 @@ def evaluate_env(
         nan_resets=int(r["nan"].sum()),
         seconds=seconds,
         seed=seed,
+        pos_rmse=rms("pos_sq_err"),
+        ee_rmse=rms("ee_sq_err"),
+        task={k: mean_ci(r[k]) for k in getattr(env, "TASK_MEASURES", ())},
         per_episode=r,
     )
 
@@ -115,7 +125,7 @@ def evaluate(
     *,
     task: str = "a1_arm/reaching",
     episodes: int = 64,
-    steps: int = 1000,
+    steps: int | None = None,
     seed: int = 0,
     dpc_policy_for: Callable[[str], Policy] | None = None,
     overrides: dict | None = None,
@@ -124,13 +134,14 @@ def evaluate(
 ) -> list[CellResult]:
     """Every (arm, controller) cell of the protocol on `task`; an arm is a variant name or an arm
     (`robots.UrdfArm`, ...), its cells labelled `robots.arm_name(arm)`; `dpc_policy_for(name)`
-    gives the DPC policy of an arm (its encoder + the shared actor), needed for 'dpc'."""
+    gives the DPC policy of an arm (its encoder + the shared actor), needed for 'dpc'; `steps`
+    per episode default to the task's episode length (`EnvConfig.episode_length`)."""
     unknown = sorted(set(controllers) - set(CONTROLLERS))
     if unknown:
         raise DpcError(f"Unknown controller(s) {unknown}; choose from {list(CONTROLLERS)}.")
     if "dpc" in controllers and dpc_policy_for is None:
         raise DpcError("Evaluating 'dpc' needs a trained policy: pass dpc_policy_for (or --run).")
-    if episodes < 1 or steps < 1:
+    if episodes < 1 or (steps is not None and steps < 1):
         raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
     results = []
     for arm in arms:
@@ -140,7 +151,8 @@ def evaluate(
             env_controller = "policy" if controller == "dpc" else controller
             env = make(task, arm=arm, controller=env_controller, **(overrides or {}))
             policy = policy_for_arm if controller == "dpc" else None
-            cell = evaluate_env(env, name, controller, episodes, steps, seed, policy, progress)
+            n_steps = env.config.episode_length if steps is None else steps
+            cell = evaluate_env(env, name, controller, episodes, n_steps, seed, policy, progress)
             results.append(cell)
             if on_result is not None:
                 on_result(cell)
@@ -164,9 +176,23 @@ def table_row(c: CellResult) -> str:
     )
 
 
+TASK_HEADER = (
+    "| arm | controller | path RMSE (m) | end-effector RMSE (m) | task measures at the end "
+    "[95% CI] |\n|---|---|---|---|---|"
+)
+
+
+def task_row(c: CellResult) -> str:
+    """A markdown row under `TASK_HEADER`."""
+    measures = "; ".join(f"{k} {m:.3f} [{lo:.3f}, {hi:.3f}]" for k, (m, lo, hi) in c.task.items())
+    return f"| {c.arm} | {c.controller} | {c.pos_rmse:.3f} | {c.ee_rmse:.4f} | {measures or '-'} |"
+
+
+# per-episode CSV columns; a task's measures (`DpcEnv.TASK_MEASURES`) follow them
 EPISODE_COLUMNS = (
     *("arm", "controller", "seed", "episode", "fell", "fall_step", "nan_reset", "length"),
     *("return", "roll_rms", "pitch_rms", "vx_rmse", "vy_rmse", "yaw_rate_rmse"),
+    *("pos_rmse", "ee_rmse"),
 )
 
 
@@ -174,7 +200,8 @@ def episode_rows(c: CellResult) -> list[dict]:
     """One row per episode of a cell (`EPISODE_COLUMNS`): `episode` i was reset from the i-th
     key of `seed`, so rows with the same (seed, episode) are the same episode under every
     controller (pair them); `fall_step` is the env step (1-based) of the fall, empty if none;
-    RMS errors (rad, m/s, rad/s) over the steps before the episode's end."""
+    RMS errors (rad, m/s, rad/s, m) over the steps before the episode's end; then the task's
+    measures at the episode's end."""
     r = c.per_episode
     measured = np.maximum(r["measured"], 1.0)
 
@@ -197,21 +224,29 @@ def episode_rows(c: CellResult) -> list[dict]:
             "vx_rmse": rms("vx_sq_err", i),
             "vy_rmse": rms("vy_sq_err", i),
             "yaw_rate_rmse": rms("yaw_rate_sq_err", i),
+            "pos_rmse": rms("pos_sq_err", i),
+            "ee_rmse": rms("ee_sq_err", i),
+            **{k: float(r[k][i]) for k in c.task},
         }
         for i in range(len(r["return"]))
     ]
 
 
-def write_episodes_csv(path: str | pathlib.Path, cells: list[CellResult]) -> pathlib.Path:
+def write_episodes_csv(
+    path: str | pathlib.Path, cells: list[CellResult], engines: list[str] | None = None
+) -> pathlib.Path:
     """Every episode of `cells` as a CSV row (`episode_rows`), to re-analyse, pair or bootstrap a
-    table without re-running it."""
+    table without re-running it; with `engines` (one per cell), an `engine` column first."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    measures = dict.fromkeys(k for c in cells for k in c.task)
+    columns = ["engine"] * (engines is not None) + [*EPISODE_COLUMNS, *measures]
     with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(EPISODE_COLUMNS))
+        w = csv.DictWriter(f, fieldnames=columns, restval="")
         w.writeheader()
-        for c in cells:
-            w.writerows(episode_rows(c))
+        for i, c in enumerate(cells):
+            label = {} if engines is None else {"engine": engines[i]}
+            w.writerows({**label, **row} for row in episode_rows(c))
     return path
 
 

@@ -37,10 +37,12 @@ from dpc_mjx.run.eval import (
     CONTROLLERS,
     PAIRED_HEADER,
     TABLE_HEADER,
+    TASK_HEADER,
     CellResult,
     evaluate,
     paired_rows,
     table_row,
+    task_row,
     write_episodes_csv,
 )
 from dpc_mjx.sac import warm_start
@@ -295,10 +297,12 @@ def _evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[
 
     cells = evaluate(arms, controllers, on_result=show, **kwargs)
     paired = paired_rows(cells)
+    tasks = [TASK_HEADER, *map(task_row, cells)]
+    print("\n" + "\n".join(tasks), flush=True)
     if paired:
         print("\n" + "\n".join([PAIRED_HEADER, *paired]), flush=True)
     if out is not None:
-        lines = [*preface, TABLE_HEADER, *map(table_row, cells)]
+        lines = [*preface, TABLE_HEADER, *map(table_row, cells), "", *tasks]
         lines += ["", PAIRED_HEADER, *paired] if paired else []
         pathlib.Path(out).write_text("\n".join(lines) + "\n")
     if csv is not None:
@@ -372,7 +376,7 @@ def evaluate_export(
     controllers: list[str] = CONTROLLERS,
     task: str = "a1_arm/reaching",
     episodes: int = 64,
-    steps: int = 1000,
+    steps: int | None = None,
     seed: int = 1000,
     out: str | pathlib.Path | None = None,
     csv: str | pathlib.Path | None = None,
@@ -381,8 +385,9 @@ def evaluate_export(
     """The evaluation protocol for the arms of an export (default: the arm its policy was trained
     on, its first encoder; transferred encoders are added after it; an arm is an encoder's name,
     a variant, or an arm file or description as for `transfer_arm`),
-    under the env options it was trained with and `env` over them (e.g. exact sensors); prints
-    the table (and writes it to `out`, and one row per episode to `csv`)."""
+    under the env options it was trained with and `env` over them (e.g. exact sensors), for
+    `steps` per episode (default: the task's episode length); prints the table (and writes it
+    to `out`, and one row per episode to `csv`)."""
     artefacts, arms, overrides = export_cells(export_dir, arms, controllers, task, env)
     return _evaluate_table(
         arms,

@@ -12,7 +12,6 @@ and the episodes that fell under one engine only).
 
 from __future__ import annotations
 
-import csv as csv_lib
 import dataclasses
 import pathlib
 
@@ -20,13 +19,12 @@ from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import ENGINES
 from dpc_mjx.run.eval import (
     CONTROLLERS,
-    EPISODE_COLUMNS,
     PAIRED_HEADER,
     CellResult,
-    episode_rows,
     evaluate,
     paired_row,
     paired_rows,
+    write_episodes_csv,
 )
 from dpc_mjx.run.pipeline import SHIPPED, export_cells
 
@@ -73,7 +71,7 @@ def sim2sim(
     controllers: list[str] = CONTROLLERS,
     task: str = "a1_arm/reaching",
     episodes: int = 64,
-    steps: int = 1000,
+    steps: int | None = None,
     seed: int = 1000,
     env: dict | None = None,
     out: str | pathlib.Path | None = None,
@@ -111,13 +109,7 @@ def sim2sim(
         lines = [HEADER, *table, "", PAIRED_HEADER, *paired]
         pathlib.Path(out).write_text("\n".join(lines) + "\n")
     if csv is not None:
-        path = pathlib.Path(csv)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("w", newline="") as f:
-            w = csv_lib.DictWriter(f, fieldnames=["engine", *EPISODE_COLUMNS])
-            w.writeheader()
-            for engine, engine_cells in cells.items():
-                for c in engine_cells:
-                    w.writerows({"engine": engine, **r} for r in episode_rows(c))
+        engines = [e for e, engine_cells in cells.items() for _ in engine_cells]
+        path = write_episodes_csv(csv, [c for e in cells.values() for c in e], engines)
         print(f"per-episode rows: {path}", flush=True)
     return cells

@@ -20,14 +20,19 @@ the jaws), gripper pitched about 45 deg down, robot standing level at `scripts.S
 ball k goes from its place on the source table to the same place on the target table
 (translated by -0.6 m in y), so the two arms of `double` never cross.
 
+Each episode runs the script at its own pace (script time = rate x time, rate ~
+U(`script_rate`)) and adds its own weight to each ball (`object_mass`); the body stands (trot in
+place, command 0) and the end effectors get vertical pushes (`push_force`; no payload).
+Calibration: docs/results.md (Table I).
+
 Grasp: a weld, not friction (see `robots.objects`). During the close move and its hold, weld k
 switches on as soon as the grasp site is within `grasp_threshold` of ball k
 (`objects.grasp_gaps`), and stays on until the release move starts (`task_physics`, every
 physics step, via `objects.set_welds`).
 
-Metrics: `ball_target_dist` (m, mean over balls of ball centre to its rest point on the target
-table), `ball_on_target` (fraction of balls resting on the target table, weld off), `grasped`
-(fraction of welds on). The body stands (trot in place, command 0); no pushes, no payload.
+Metrics (`TASK_MEASURES`, read at the episode's end): `ball_on_target` (fraction of balls
+resting on the target table, weld off: delivered), `ball_target_dist` (m, mean over balls of ball
+centre to its rest point on the target table); per step also `grasped` (fraction of welds on).
 """
 
 from __future__ import annotations
@@ -63,6 +68,7 @@ PLACE_CLEARANCE = 0.01  # m, ball above its rest height when released
 APPROACH_Z = -0.7  # world z of the gripper's approach axis (about 45 deg down), soft
 FINGER_CLOSED = 0.004  # m: jaws 0.044 - 0.004 = 0.04 m apart, the ball's diameter
 REST_TOL = 0.01  # m, ball centre from its rest height on the target table for `ball_on_target`
+PUSHES = (0.0, 15.0)  # N, vertical end-effector pushes ~ U (the calibration: docs/results.md)
 # Move indices of the script (see the module doc).
 _CLOSE, _LIFT, _RELEASE = 2, 3, 6
 
@@ -87,14 +93,19 @@ class CarryingConfig(EnvConfig):
 
 
 def default_config() -> CarryingConfig:
-    """Stand (trot in place, command 0) while the arm carries; no pushes, no payload; 13 s."""
+    """Stand (trot in place, command 0) while the arm carries at its episode's pace, the balls
+    weighted per episode, vertical end-effector pushes (calibrated: docs/results.md, Table I);
+    no payload; 13 s."""
     return CarryingConfig(
         command_vx=(0.0, 0.0),
         command_vy=(0.0, 0.0),
         command_yaw=(0.0, 0.0),
         command_switch=(NEVER, NEVER),
-        push_force=(0.0, 0.0),
+        push_force=PUSHES,
+        push_axis_weights=(0.0, 0.0, 1.0),
         payload_mass=(0.0, 0.0),
+        object_mass=(0.3, 1.0),
+        script_rate=(0.9, 1.1),
         episode_length=650,
     )
 
@@ -104,6 +115,7 @@ class CarryingEnv(DpcEnv):
 
     TASK = "carrying"
     DEFAULT_ARM = "regular"
+    TASK_MEASURES = ("ball_on_target", "ball_target_dist")
     TABLE_HEIGHT = TABLE_HEIGHT  # m, top surface above the floor (the module's 0.3)
 
     def __init__(self, config: CarryingConfig, arm: str | Arm | RobotSpec | None = None):
@@ -180,17 +192,23 @@ class CarryingEnv(DpcEnv):
     def check_arm(cls, robot: RobotSpec) -> None:
         scripts.check_task_arms(cls.TASK, robot, gripper=True)
 
+    def draw_task(self, key: jax.Array) -> jax.Array:
+        """(1,) [script pace]."""
+        return scripts.draw_rate(key, self.config)[None]
+
     def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
-        del dist, d
-        return self.script.targets(t)
+        del d
+        return self.script.targets(t * dist.task[0])
 
-    def task_physics(self, d, t: jax.Array):
+    def task_physics(self, d, t: jax.Array, dist):
+        ts = t * dist.task[0]  # s, script time
         gaps = objects.grasp_gaps(d, self.props)  # (k,) m
-        window = (t >= self.t_close) & (t < self.t_lift)
+        window = (ts >= self.t_close) & (ts < self.t_lift)
         held = d.eq_active[self.props.welds] | (window & (gaps < self.config.grasp_threshold))
-        return objects.set_welds(d, self.props, held & (t < self.t_release))
+        return objects.set_welds(d, self.props, held & (ts < self.t_release))
 
-    def task_metrics(self, d) -> dict[str, jax.Array]:
+    def task_metrics(self, d, dist) -> dict[str, jax.Array]:
+        del dist
         balls = d.qpos[self._ball_qpos]  # (k, 3) m
         held = d.eq_active[self.props.welds]
         inside = jp.all((balls[:, :2] >= self._target_lo) & (balls[:, :2] <= self._target_hi), 1)

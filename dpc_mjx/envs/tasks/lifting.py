@@ -4,15 +4,20 @@ lifts a 0.3 kg ball up and down.
 Scene (`LiftingEnv.scene_spec(arm)`): one 0.3 kg ball (`BALL_MASS`) per arm, welded between the
 jaws from the start (the weld stays on; the finger is shut on it). Gripper arms only.
 
-Script: the body walks at v_x 0.3 m/s, and at `command_switch` = 10 s starts turning at 0.3 rad/s
-(`command_after`), so the desired trajectory is a straight line then an arc. The arm repeats
-home -> raised -> home with period 2 (`move_time` + `hold_time`) = 4 s from t = 0: up in 1 s,
-hold 1 s, down in 1 s, hold 1 s. The raised pose puts the grasp site `RAISE` (m, trunk frame)
-from its home position with the gripper level, solved once per env (`scripts.solve_ik`); for the
-regular arm shoulder 0.06, elbow -1.09, wrist 1.03 rad (the ball goes 12 cm up, 6 cm back).
-Sudden end-effector pushes as in reaching (|F| ~ U(0, 30) N); no extra payload (the ball is real).
+Script: the body walks at v_x ~ U(0.2, 0.4) m/s, and at `command_switch` ~ U(8, 12) s starts
+turning at 0.3 rad/s (`command_after`, v_x 0.3 m/s), so the desired trajectory is a straight line
+then an arc. The arm repeats home -> raised -> home with period 2 (`move_time` + `hold_time`) =
+4 s of script time from t = 0: up in 1 s, hold 1 s, down in 1 s, hold 1 s; script time runs at
+the episode's pace (rate ~ U(`script_rate`)) and each lift goes a fraction ~ U(`lift_gain`) of
+the way to the raised pose. The raised pose puts the grasp site `RAISE` (m, trunk frame) from its
+home position with the gripper level, solved once per env (`scripts.solve_ik`); for the regular
+arm shoulder 0.06, elbow -1.09, wrist 1.03 rad (the ball goes 12 cm up, 6 cm back). Each episode
+adds its own weight to the ball (`object_mass`); vertical end-effector pushes (`push_force`); no
+payload (the ball is real). Calibration: docs/results.md (Table I).
 
-Metric: `ball_gap` (m, largest distance from a grasp site to its ball's centre: the weld's slack).
+Metrics: `ball_gap` (m, largest distance from a grasp site to its ball's centre: the weld's
+slack); the task's success measures are the env's own `pos_sq_err` (the body's distance from the
+desired path: the paper's trajectory tracking) and `ee_sq_err` (`TASK_MEASURES` is empty).
 """
 
 from __future__ import annotations
@@ -25,15 +30,17 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.envs.base import DpcEnv
-from dpc_mjx.envs.config import EnvConfig, _number, _positive
+from dpc_mjx.envs.config import EnvConfig, _number, _positive, _range
 from dpc_mjx.envs.tasks import scripts
 from dpc_mjx.envs.tasks.carrying import FINGER_CLOSED
+from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import objects
 from dpc_mjx.robots.assemble import arm_prefix
 from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 BALL_MASS = 0.3  # kg, the paper's ball
 RAISE = np.array([-0.06, 0.0, 0.12])  # m, grasp site raised pose minus home pose
+PUSHES = (0.0, 30.0)  # N, vertical end-effector pushes ~ U (the calibration: docs/results.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,22 +49,33 @@ class LiftingConfig(EnvConfig):
 
     move_time: float = 1.0  # s, home -> raised and back
     hold_time: float = 1.0  # s at each end
+    lift_gain: tuple[float, float] = (1.0, 1.0)  # fraction of the raise per episode ~ U
 
     def validate(self) -> None:
         super().validate()
         _positive("move_time", self.move_time)
         _number("hold_time", self.hold_time, low=0.0)
+        _range("lift_gain", self.lift_gain, low=0.0)
+        if self.lift_gain[1] > 1.5:
+            raise DpcError(f"lift_gain must stay <= 1.5 (joint ranges), got {self.lift_gain!r}.")
 
 
 def default_config() -> LiftingConfig:
-    """v_x 0.3 m/s, turning at 0.3 rad/s from 10 s; reaching's pushes; no payload."""
+    """v_x ~ 0.3 m/s, turning at 0.3 rad/s from ~10 s; the lift's pace and height and the
+    ball's weight per episode; vertical end-effector pushes (calibrated: docs/results.md,
+    Table I); no payload."""
     return LiftingConfig(
-        command_vx=(0.3, 0.3),
+        command_vx=(0.2, 0.4),
         command_vy=(0.0, 0.0),
         command_yaw=(0.0, 0.0),
-        command_switch=(10.0, 10.0),
+        command_switch=(8.0, 12.0),
         command_after=(0.3, 0.0, 0.3),
+        push_force=PUSHES,
+        push_axis_weights=(0.0, 0.0, 1.0),
         payload_mass=(0.0, 0.0),
+        object_mass=(0.5, 2.0),
+        script_rate=(0.8, 1.25),
+        lift_gain=(0.7, 1.0),
     )
 
 
@@ -108,9 +126,17 @@ class LiftingEnv(DpcEnv):
     def check_arm(cls, robot: RobotSpec) -> None:
         scripts.check_task_arms(cls.TASK, robot, gripper=True)
 
-    def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
-        del dist, d
-        return self.script.targets(jp.mod(t, self.period))
+    def draw_task(self, key: jax.Array) -> jax.Array:
+        """(2,) [script pace, lift gain]."""
+        k_rate, k_gain = jax.random.split(key)
+        low, high = self.config.lift_gain
+        gain = jax.random.uniform(k_gain, (), minval=low, maxval=high)
+        return jp.stack([scripts.draw_rate(k_rate, self.config), gain])
 
-    def task_metrics(self, d) -> dict[str, jax.Array]:
+    def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
+        del d
+        return self.script.targets(jp.mod(t * dist.task[0], self.period), dist.task[1])
+
+    def task_metrics(self, d, dist) -> dict[str, jax.Array]:
+        del dist
         return {"ball_gap": jp.max(objects.grasp_gaps(d, self.props))}

@@ -5,11 +5,14 @@ ahead; only the end effector (the `pusher`'s plate, or a gripper's three boxes) 
 default arm is `pusher`, the paper's "heavier but flat" arm (0.5 kg plate); any WidowX-like arm
 (`ArmSpec`) can push.
 
-Script: the body walks at a constant command (v_x 0.2 m/s) and stops (command 0) at
-`command_switch` = 5.5 s, when the box is about at its target 1.5 m ahead; the arm moves from
-home to a fixed pushing pose during the first `arm_move_time` s and holds it, so the plate meets
-the box after about 1.5 s and pushes it: a steady contact force on the arm is the disturbance;
-the random end-effector pushes and the payload are off.
+Script: the body walks at a constant command (v_x ~ U(0.15, 0.25) m/s) and stops (command 0)
+at `command_switch` ~ U(5, 6) s, when the box is about at its target 1.5 m ahead; the arm moves
+from home to a fixed pushing pose during the first `arm_move_time` s (divided by the episode's
+pace ~ U(`script_rate`)) and holds it, so the plate meets the box after about 1.5 s and pushes
+it: a steady contact force on the arm is the disturbance. Each episode draws the box's place
+(`box_jitter`: x, y, heading offsets ~ U(-j, j)) and its added weight (`object_mass`), and the
+end effector gets vertical pushes (`push_force`; the payload is off). Calibration: docs/results.md
+(Table I).
 
 The pushing pose is solved once per env (`scripts.solve_ik`, MuJoCo C): the ee site (the plate's
 face centre) `PUSH_REACH` ahead of the trunk at `PUSH_HEIGHT` above the floor, its normal pitched
@@ -18,8 +21,10 @@ wrist limits), above the box's 0.2 m top; pitched 60 deg down, the plate's upper
 meets the box face at about 0.17 m, below the 0.2 m where a push against floor friction 0.5
 would tip the box. For `pusher`: shoulder 1.84, elbow -0.49, wrist -0.31 rad.
 
-Metrics: `box_dx` (m, box displacement along x since reset) and `box_target_dist` (m, box centre
-to the target point (`push_target`, 0), horizontal).
+Metrics (`TASK_MEASURES`, read at the episode's end): `box_dx` (m, the box's displacement
+along x since reset), `box_turn` (rad, |change of the box's heading| since reset: a straight push
+keeps it) and `box_target_dist` (m, box centre to the target point (`push_target`, 0),
+horizontal).
 """
 
 from __future__ import annotations
@@ -35,8 +40,10 @@ import numpy as np
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig, _number, _positive
 from dpc_mjx.envs.tasks import scripts
+from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import objects
 from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
+from dpc_mjx.rotations import roll_pitch_yaw
 
 # The box (m, kg): a light 0.2 m cardboard cube 0.7 m ahead of the trunk.
 BOX_HALF = (0.1, 0.1, 0.1)
@@ -46,6 +53,7 @@ BOX_FRICTION = 0.5  # box-floor and box-plate (the box has contact priority)
 PUSH_REACH = 0.30  # m, ee site ahead of the trunk origin (x, trunk frame)
 PUSH_HEIGHT = 0.15  # m, ee site above the floor
 PUSH_PITCH = math.radians(60.0)  # plate normal below the horizontal
+PUSHES = (0.0, 30.0)  # N, vertical end-effector pushes ~ U (the calibration: docs/results.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,23 +62,34 @@ class PushingConfig(EnvConfig):
 
     push_target: float = 1.5  # m, world x of the box centre's goal (it starts at 0.7 m)
     arm_move_time: float = 1.0  # s, home -> pushing pose at the start of the episode
+    # the box's place: x, y (m) and heading (rad) offsets from `BOX_POS`, each ~ U(-j, j)
+    box_jitter: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def validate(self) -> None:
         super().validate()
         _number("push_target", self.push_target)
         _positive("arm_move_time", self.arm_move_time)
+        if not (isinstance(self.box_jitter, tuple) and len(self.box_jitter) == 3):
+            raise DpcError(f"box_jitter must be an (x, y, heading) tuple, got {self.box_jitter!r}.")
+        for v, high in zip(self.box_jitter, (0.1, 0.05, 0.5), strict=True):
+            _number("box_jitter", v, low=0.0, high=high)  # the plate still meets the box
 
 
 def default_config() -> PushingConfig:
-    """Walk at 0.2 m/s for 5.5 s then stand (trotting in place); no pushes, no payload."""
+    """Walk at ~0.2 m/s for ~5.5 s then stand (trotting in place); the box placed and weighted
+    per episode; vertical end-effector pushes (calibrated: docs/results.md, Table I)."""
     return PushingConfig(
-        command_vx=(0.2, 0.2),
+        command_vx=(0.15, 0.25),
         command_vy=(0.0, 0.0),
         command_yaw=(0.0, 0.0),
-        command_switch=(5.5, 5.5),
+        command_switch=(5.0, 6.0),
         command_after=(0.0, 0.0, 0.0),
-        push_force=(0.0, 0.0),
+        push_force=PUSHES,
+        push_axis_weights=(0.0, 0.0, 1.0),
         payload_mass=(0.0, 0.0),
+        object_mass=(1.0, 4.0),
+        script_rate=(0.8, 1.25),
+        box_jitter=(0.05, 0.03, 0.2),
         episode_length=500,  # 10 s
     )
 
@@ -80,6 +99,7 @@ class PushingEnv(DpcEnv):
 
     TASK = "pushing"
     DEFAULT_ARM = "pusher"
+    TASK_MEASURES = ("box_dx", "box_turn", "box_target_dist")
 
     def __init__(self, config: PushingConfig, arm: str | Arm | RobotSpec | None = None):
         super().__init__(config, arm)
@@ -96,8 +116,8 @@ class PushingEnv(DpcEnv):
             pose[cols[k] : cols[k + 1]] = q  # a finger (gripper arms) stays at home
         self.script = scripts.Script.through([home, pose], 0.0, config.arm_move_time, 0.0)
         self.pose = pose  # (n_act,) the pushing pose's servo targets
-        self._box_qpos = box.qpos[:2]
-        self._box_start = np.asarray(model.key_qpos[0][box.qpos[:2]], np.float32)
+        self._box_qpos = box.qpos  # (7,) x, y, z, quaternion
+        self._box_home = np.asarray(model.key_qpos[0][box.qpos], np.float32)
 
     @classmethod
     def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
@@ -114,14 +134,29 @@ class PushingEnv(DpcEnv):
     def check_arm(cls, robot: RobotSpec) -> None:
         scripts.check_task_arms(cls.TASK, robot, gripper=False)
 
-    def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
-        del dist, d
-        return self.script.targets(t)
+    def draw_task(self, key: jax.Array) -> jax.Array:
+        """(4,) [script pace, box x offset (m), y offset (m), heading (rad)]."""
+        k_rate, k_box = jax.random.split(key)
+        j = jp.asarray(self.config.box_jitter)
+        box = jax.random.uniform(k_box, (3,), minval=-j, maxval=j)
+        return jp.concatenate([scripts.draw_rate(k_rate, self.config)[None], box])
 
-    def task_metrics(self, d) -> dict[str, jax.Array]:
-        xy = d.qpos[self._box_qpos]
+    def place_objects(self, qpos: jax.Array, dist) -> jax.Array:
+        dx, dy, heading = dist.task[1], dist.task[2], dist.task[3]
+        box = jp.asarray(self._box_home).at[:2].add(jp.stack([dx, dy]))
+        box = box.at[3:].set(jp.stack([jp.cos(heading / 2), 0.0, 0.0, jp.sin(heading / 2)]))
+        return qpos.at[self._box_qpos].set(box)
+
+    def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
+        del d
+        return self.script.targets(t * dist.task[0])
+
+    def task_metrics(self, d, dist) -> dict[str, jax.Array]:
+        box = d.qpos[self._box_qpos]
         goal = jp.array([self.config.push_target, 0.0])
+        turn = roll_pitch_yaw(box[3:])[2] - dist.task[3]
         return {
-            "box_dx": xy[0] - self._box_start[0],
-            "box_target_dist": jp.linalg.norm(xy - goal),
+            "box_dx": box[0] - self._box_home[0] - dist.task[1],
+            "box_turn": jp.abs(jp.arctan2(jp.sin(turn), jp.cos(turn))),
+            "box_target_dist": jp.linalg.norm(box[:2] - goal),
         }

@@ -23,6 +23,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 
+from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.arms import ArmSpec
 from dpc_mjx.robots.layout import ArmLayout
@@ -68,10 +69,17 @@ class Script:
         """s, when the last move ends."""
         return float(self.start[-1] + self.duration[-1]) if len(self.start) else 0.0
 
-    def targets(self, t: jax.Array) -> jax.Array:
-        """(n,) servo targets at time t (s)."""
+    def targets(self, t: jax.Array, gain: jax.Array | float = 1.0) -> jax.Array:
+        """(n,) servo targets at script time t (s), every move scaled by `gain` (its amplitude;
+        1: the waypoints)."""
         x = jp.clip((t - self.start) / self.duration, 0.0, 1.0)  # (m,)
-        return jp.asarray(self.q0) + smooth(x) @ jp.asarray(self.delta)
+        return jp.asarray(self.q0) + gain * (smooth(x) @ jp.asarray(self.delta))
+
+
+def draw_rate(key: jax.Array, config: EnvConfig) -> jax.Array:
+    """() the episode's script pace ~ U(config.script_rate): script time = rate x time."""
+    low, high = config.script_rate
+    return jax.random.uniform(key, (), minval=low, maxval=high)
 
 
 def smooth(x: jax.Array) -> jax.Array:

@@ -1,0 +1,142 @@
+"""The paper's Table I on its tasks: each arm on the task it suits, with the policy and decoder
+trained once on `regular`/reaching and only the arm's encoder transferred (the paper's protocol).
+
+    python experiments/table_one.py [--export DIR] [--episodes 64] [--seed 13000]
+        [--engine native] [--out runs/table_one]
+
+Cells, and the paper's rows they stand for (its Table I names arms, not tasks; the text maps
+them: "a heavier but flat robotic arm is used for [pushing]", the longer arm for the higher table,
+two arms for several balls):
+
+    reaching / regular         the paper's `regular` row (the training task)
+    lifting / regular          the paper's Fig. "ball lifting" (no row)
+    carrying_high / longer     the `longer` row
+    carrying / double          the `double` row
+    pushing / pusher           the `heavier` row (our `pusher`: the `regular` links with a 0.5 kg
+                               flat plate; our `heavier` keeps a 0.5 kg gripper)
+
+Every cell runs MBC, the observer, DPC and the oracle (privileged: the measured arm wrench) on
+the same `--episodes` episodes of each task's default config (seeds `--seed`..: say in the docs
+that they chose nothing), for the task's episode length. Writes, per cell, the evaluation's
+markdown and per-episode CSV to `--out`, and prints a summary: fall rate and return per
+controller, DPC - MBC paired on the same episodes, and the task's measures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import pathlib
+
+import numpy as np
+
+from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
+from dpc_mjx.run.stats import mean_ci, paired_diff_ci
+
+CELLS = (  # (task, arm, the paper's row, the task's main measure: a CSV column)
+    ("reaching", "regular", "regular", "ee_rmse"),
+    ("lifting", "regular", "(Fig. lifting)", "pos_rmse"),
+    ("carrying_high", "longer", "longer", "ball_on_target"),
+    ("carrying", "double", "double", "ball_on_target"),
+    ("pushing", "pusher", "heavier", "box_dx"),
+)
+CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
+HEADER = (
+    "| task / arm | paper's row | MBC: fall rate, return [95% CI] | observer | DPC "
+    "| oracle (privileged) | DPC - MBC return, paired [95% CI] "
+    "| DPC - MBC fall rate, paired [95% CI] |\n|---|---|---|---|---|---|---|---|"
+)
+MEASURE_HEADER = (
+    "| task / arm | measure (per episode) | MBC [95% CI] | observer | DPC | oracle (privileged) "
+    "| DPC - MBC, paired [95% CI] | oracle - MBC, paired [95% CI] |\n"
+    "|---|---|---|---|---|---|---|---|"
+)
+
+
+def read_cell(path: pathlib.Path) -> dict[str, dict[str, np.ndarray]]:
+    """{controller: {column: (episodes,) array}} from a cell's per-episode CSV, episodes in
+    order (the same episodes under every controller)."""
+    by: dict[str, list[dict]] = {}
+    with path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            by.setdefault(row["controller"], []).append(row)
+    out = {}
+    for controller, rows in by.items():
+        rows.sort(key=lambda r: int(r["episode"]))
+        out[controller] = {
+            k: np.array([float(r[k]) for r in rows])
+            for k in rows[0]
+            if k not in ("arm", "controller", "fall_step")
+        }
+    return out
+
+
+def _ci(values: np.ndarray, fmt: str = ".3f") -> str:
+    m, lo, hi = mean_ci(values)
+    return f"{m:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
+
+
+def _paired(a: np.ndarray, b: np.ndarray, fmt: str = "+.3f") -> str:
+    d, lo, hi = paired_diff_ci(a, b)
+    return f"{d:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
+
+
+def summarize(out: pathlib.Path) -> str:
+    """The two summary tables from the cells' CSVs in `out`."""
+    rows, measures = [], []
+    for task, arm, paper, measure in CELLS:
+        path = out / f"{task}-{arm}.csv"
+        if not path.exists():
+            continue
+        c = read_cell(path)
+        figures = " | ".join(
+            f"{c[k]['fell'].mean():.2f}, {_ci(c[k]['return'], '.1f')}" for k in CONTROLLERS
+        )
+        dpc, mbc = c["dpc"], c["mbc"]
+        rows.append(
+            f"| {task} / {arm} | {paper} | {figures} | "
+            f"{_paired(dpc['return'], mbc['return'], '+.1f')} | "
+            f"{_paired(dpc['fell'], mbc['fell'])} |"
+        )
+        per = " | ".join(_ci(c[k][measure]) for k in CONTROLLERS)
+        measures.append(
+            f"| {task} / {arm} | {measure} | {per} | {_paired(dpc[measure], mbc[measure])} | "
+            f"{_paired(c['oracle'][measure], mbc[measure])} |"
+        )
+    return "\n".join([HEADER, *rows, "", MEASURE_HEADER, *measures])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--export", default=str(SHIPPED))
+    ap.add_argument("--episodes", type=int, default=64)
+    ap.add_argument("--seed", type=int, default=13000)
+    ap.add_argument("--engine", default="native", help="mjx or native (the faster on a CPU)")
+    ap.add_argument("--out", default="runs/table_one")
+    ap.add_argument(
+        "--summarize", action="store_true", help="only the summary, from the CSVs in --out"
+    )
+    args = ap.parse_args()
+
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for task, arm, _, _ in [] if args.summarize else CELLS:
+        print(f"\n## {task} / {arm}", flush=True)
+        evaluate_export(
+            args.export,
+            arms=[arm],
+            controllers=list(CONTROLLERS),
+            task=f"a1_arm/{task}",
+            episodes=args.episodes,
+            seed=args.seed,
+            out=out / f"{task}-{arm}.md",
+            csv=out / f"{task}-{arm}.csv",
+            env={"engine": args.engine},
+        )
+    table = summarize(out)
+    print("\n" + table, flush=True)
+    (out / "summary.md").write_text(table + "\n")
+
+
+if __name__ == "__main__":
+    main()
