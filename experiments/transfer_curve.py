@@ -1,7 +1,8 @@
 """Transfer to a new arm, measured: DPC's fall rate and return against the encoder's data budget.
 
     python experiments/transfer_curve.py --arm longer [--export DIR] [--budgets 1000 3000 10000
-        30000 100000] [--episodes 64] [--seed 2000] [--full RUN_EXPORT] [--out FILE.md]
+        30000 100000] [--episodes 64] [--seed 2000] [--full RUN_EXPORT] [--engine native]
+        [--out FILE.md]
 
 The paper's protocol (§III-C): the export's policy and decoder stay frozen; only a new encoder is
 trained, on MBC random-motion samples of the new arm. One collection of max(budgets) samples
@@ -13,7 +14,9 @@ oracle (given the measured mount wrench: privileged) once, DPC once per budget, 
 `--full`, the DPC of a policy trained from scratch for this arm with the whole pipeline.
 Prints one table: falls, fall rate and return with 95% intervals, the paired return difference
 against MBC on the same episodes, and with `--full` the share of the full policy's gain over MBC
-that each budget reaches, (R - R_MBC) / (R_full - R_MBC).
+that each budget reaches, (R - R_MBC) / (R_full - R_MBC). `--engine native` collects and
+evaluates in MuJoCo C (`EnvConfig.engine`; for heavy arms such as `z1`, which MJX steps slowly
+on a CPU).
 """
 
 from __future__ import annotations
@@ -47,11 +50,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=2000, help="first evaluation seed")
     ap.add_argument("--data-seed", type=int, default=0)
     ap.add_argument("--full", help="the export of a policy trained from scratch for this arm")
+    ap.add_argument("--engine", default="mjx", help="mjx or native (physics of every stage)")
     ap.add_argument("--out", help="also write the table to this markdown file")
     args = ap.parse_args()
 
     art = io.load(args.export)
-    overrides = env_overrides(art)
+    overrides = {**env_overrides(art), "engine": args.engine}
     data = adapter.collect(
         make(TASK, arm=args.arm, controller="mbc", **overrides),
         max(args.budgets),
