@@ -198,10 +198,10 @@ class CarryingEnv(DpcEnv):
 
     def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
         del d
-        return self.script.targets(t * dist.task[0])
+        return self.script.targets(scripts.script_time(t, dist))
 
     def task_physics(self, d, t: jax.Array, dist):
-        ts = t * dist.task[0]  # s, script time
+        ts = scripts.script_time(t, dist)
         gaps = objects.grasp_gaps(d, self.props)  # (k,) m
         window = (ts >= self.t_close) & (ts < self.t_lift)
         held = d.eq_active[self.props.welds] | (window & (gaps < self.config.grasp_threshold))

@@ -135,7 +135,8 @@ class LiftingEnv(DpcEnv):
 
     def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
         del d
-        return self.script.targets(jp.mod(t * dist.task[0], self.period), dist.task[1])
+        ts = scripts.script_time(t, dist)
+        return self.script.targets(jp.mod(ts, self.period), dist.task[1])
 
     def task_metrics(self, d, dist) -> dict[str, jax.Array]:
         del dist

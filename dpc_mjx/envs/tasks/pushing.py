@@ -149,7 +149,7 @@ class PushingEnv(DpcEnv):
 
     def arm_targets(self, dist, t: jax.Array, d) -> jax.Array:
         del d
-        return self.script.targets(t * dist.task[0])
+        return self.script.targets(scripts.script_time(t, dist))
 
     def task_metrics(self, d, dist) -> dict[str, jax.Array]:
         box = d.qpos[self._box_qpos]

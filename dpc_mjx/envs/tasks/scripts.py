@@ -77,9 +77,15 @@ class Script:
 
 
 def draw_rate(key: jax.Array, config: EnvConfig) -> jax.Array:
-    """() the episode's script pace ~ U(config.script_rate): script time = rate x time."""
+    """() the episode's script pace ~ U(config.script_rate): script time = rate x time. A task
+    puts it first in its `draw_task` (`Disturbances.task[0]`), where `script_time` reads it."""
     low, high = config.script_rate
     return jax.random.uniform(key, (), minval=low, maxval=high)
+
+
+def script_time(t: jax.Array, dist) -> jax.Array:
+    """() s, the script's time at physics time t (s), at the episode's pace (`draw_rate`)."""
+    return t * dist.task[0]
 
 
 def smooth(x: jax.Array) -> jax.Array:
