@@ -1,20 +1,23 @@
-# dpc_mjx: every target installs the project into .venv first if needed.
+# dpc_mjx: every target installs the project into .venv first if needed, with the exact versions
+# of constraints.txt; `make test-latest` tests the newest releases pyproject.toml allows instead.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-test
 BENCH_STAMP := $(VENV)/.installed-bench
+LATEST := .venv-latest
+EXTRAS := test,render,urdf
 
-.PHONY: install render-deps demo test test-all bench mjcf lint clean
+.PHONY: install render-deps demo test test-all test-latest bench mjcf lint clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ".[test,render]"
+	$(BIN)/python -m pip install -q -c constraints.txt -e ".[$(EXTRAS)]"
 	touch $(STAMP)
 
 $(BENCH_STAMP): $(STAMP)
-	$(BIN)/python -m pip install -q -e ".[test,render,bench]"
+	$(BIN)/python -m pip install -q -c constraints.txt -e ".[$(EXTRAS),bench]"
 	touch $(BENCH_STAMP)
 
 install: $(STAMP) render-deps
@@ -35,7 +38,8 @@ demo: $(STAMP)
 
 # Two workers, one test file each at a time (module fixtures share their compiles); the JAX
 # compilation cache in .cache/jax (tests/conftest.py) serves repeated compiles.
-PYTEST := $(BIN)/python -m pytest -q -n 2 --dist loadfile
+PYTEST_ARGS := -q -n 2 --dist loadfile
+PYTEST := $(BIN)/python -m pytest $(PYTEST_ARGS)
 
 test: $(STAMP) render-deps
 	$(PYTEST)
@@ -44,6 +48,19 @@ test: $(STAMP) render-deps
 # alternate arms stepped in tests/test_tasks.py (about half an hour on 2 cores).
 test-all: $(STAMP) render-deps
 	$(PYTEST) -m "slow or not slow"
+
+# The same tests in a second venv with the newest releases pyproject.toml allows (no
+# constraints; every run upgrades, so a new release of jax, flax, brax ... is picked up), with
+# its own compilation cache.
+LATEST_VERSIONS := jax jaxlib flax optax mujoco mujoco-mjx brax
+
+test-latest: render-deps
+	test -x $(LATEST)/bin/python || $(PYTHON) -m venv $(LATEST)
+	$(LATEST)/bin/python -m pip install -q --upgrade pip
+	$(LATEST)/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e ".[$(EXTRAS)]"
+	@$(LATEST)/bin/python -c "import sys; from importlib.metadata import version; \
+	  print('latest:', ', '.join(p + ' ' + version(p) for p in sys.argv[1:]))" $(LATEST_VERSIONS)
+	DPC_JAX_CACHE=$(CURDIR)/.cache/jax-latest $(LATEST)/bin/python -m pytest $(PYTEST_ARGS)
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_physics.py
@@ -60,4 +77,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check dpc_mjx tests experiments
 
 clean:
-	rm -rf $(VENV) .cache
+	rm -rf $(VENV) $(LATEST) .cache

@@ -3,6 +3,7 @@
 import contextlib as _contextlib
 import io as _io
 
+from dpc_mjx import xla_flags  # noqa: F401  (first: sets XLA_FLAGS before jax starts a backend)
 from dpc_mjx._version import __version__
 
 # mujoco.mjx prints "Failed to import warp" when the optional GPU backend is absent; we use the
@@ -13,6 +14,7 @@ with _contextlib.redirect_stdout(_io.StringIO()):
 from dpc_mjx import adapter, control, deploy, envs, io, physics, robots, sac  # noqa: E402
 from dpc_mjx.envs import make  # noqa: E402
 from dpc_mjx.errors import DpcError  # noqa: E402
+from dpc_mjx.run.sweep import sweep  # noqa: E402
 
 __all__ = [
     "DpcError",
@@ -26,4 +28,5 @@ __all__ = [
     "physics",
     "robots",
     "sac",
+    "sweep",
 ]

@@ -64,6 +64,22 @@ def test_the_paper_recipe_is_sac_from_a_random_actor_with_an_asymmetric_critic(t
     assert cli._run_config(args) == paper.replace(**{"sac.num_envs": 32})
 
 
+def test_the_gpu_preset_keeps_the_learning_rule_per_env_step(tmp_path):
+    """More envs per actor step on a GPU, the same update-to-data ratio and actor steps per
+    epoch; --device picks a preset, --set still wins over it."""
+    cpu, gpu = recipe("paper", "cpu"), recipe("paper", "gpu")
+    assert gpu.sac.num_envs == 4 * cpu.sac.num_envs
+    ratio = lambda c: c.sac.grad_updates_per_step / c.sac.num_envs  # noqa: E731
+    assert ratio(gpu) == ratio(cpu)
+    assert gpu.sac.actor_steps_per_epoch == cpu.sac.actor_steps_per_epoch
+    assert recipe("paper", "tpu") == gpu and recipe("paper") == cpu
+    args = ["train", "--run", str(tmp_path), "--device", "gpu", "--set", "sac.num_envs=512"]
+    config = cli._run_config(cli._parser().parse_args(args))
+    assert config.sac.num_envs == 512 and config.sac.grad_updates_per_step == 64
+    with pytest.raises(DpcError, match="Unknown device preset 'npu'"):
+        recipe("default", "npu")
+
+
 def test_cli_reports_bad_input_with_the_library_error(tmp_path, capsys):
     assert cli.main(["train", "--run", str(tmp_path / "r"), "--set", "sac.num_envs"]) == 2
     assert "Options take name=value" in capsys.readouterr().err

@@ -15,7 +15,8 @@ trunk frame, what an IMU's gyro reads), i.e. s_body[2:4] one env step (20 ms) la
 
 A transition whose next state is the first of a new episode (fall, NaN reset or episode end) is
 dropped: its "next" state is not a successor. `collect` runs batched steps until exactly
-`samples` transitions are kept and reports how many env steps that took.
+`samples` transitions are kept and reports how many env steps that took. On several devices the
+env batch is sharded over them (`dpc_mjx.devices`; the same rows as on one device).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import time
 import jax
 import numpy as np
 
+from dpc_mjx import devices
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
@@ -172,14 +174,18 @@ def collect(
 
     t0 = time.perf_counter()
     key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the policy
-    state = jax.jit(batched.reset)(jax.random.split(key, n_envs))
+    # several devices: the batch sharded over them, padded with copies of the first envs (their
+    # rows dropped below), so the data are those of one device
+    size = devices.padded(n_envs)
+    keys = devices.shard(devices.pad(jax.random.split(key, n_envs), size), size)
+    state = jax.jit(lambda k: devices.constrain(batched.reset(k), size))(keys)
     run_chunk = rollout.make_chunk(batched.step, policy, chunk, record)
-    carry = (state, rollout.Tally.zeros(n_envs))
+    carry = (state, devices.shard(rollout.Tally.zeros(size), size))
     ids = np.tile(np.arange(n_envs, dtype=np.int32), chunk)  # row order: (time, env)
     parts, kept, steps = [], 0, 0
     with bar(samples, "collect", "sample", progress) as pbar:
         for _, out in rollout.chunks(run_chunk, carry, key):
-            obs, u, yaw, drp, keep = (np.asarray(x).reshape(-1, *x.shape[2:]) for x in out)
+            obs, u, yaw, drp, keep = (x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out)
             parts.append((obs[keep], drp[keep], ids[keep], u[keep], yaw[keep]))
             kept += int(keep.sum())
             steps += obs.shape[0]

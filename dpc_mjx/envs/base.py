@@ -47,6 +47,8 @@ the auto-reset wrapper (`wrappers.wrap_for_training`) then resets that env alone
 
 from __future__ import annotations
 
+import copy
+
 import jax
 import jax.numpy as jp
 import mujoco
@@ -117,6 +119,22 @@ class DpcEnv(Env):
         cols = np.cumsum([0] + [len(a.act) for a in self.lay.arms])
         self._arm_cols = [np.arange(cols[k], cols[k + 1]) for k in range(len(self.lay.arms))]
         self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
+
+    def with_model(self, mx: mjx.Model) -> DpcEnv:
+        """This env on `mx`, a model of the same structure with other continuous values (one
+        element of `robots.params.batch_arm_params`'s batch, inside `jax.vmap`: `ModelBatchEnv`).
+        Physics, the data and the end-effector Jacobians use `mx`; the controller keeps its
+        model of the bare A1, which an arm's parameters do not touch. MJX engine only (the
+        native engine steps the one compiled `MjModel`)."""
+        if self.config.engine != "mjx":
+            raise DpcError(
+                f"A batch of models runs on the MJX engine only (this env has engine="
+                f"{self.config.engine!r}); build the env with engine='mjx'."
+            )
+        env = copy.copy(self)
+        env.mx = mx
+        env.physics = make_physics("mjx", self.model, mx)
+        return env
 
     # task hooks -----------------------------------------------------------------------------
 

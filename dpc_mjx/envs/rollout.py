@@ -19,6 +19,11 @@ run over the steps before the done ("measured" steps), for RMS values, and it ke
 success measures (`DpcEnv.TASK_MEASURES`) as they were at the episode's end. `step` is a
 batched step (`jax.vmap(env.step)`, or a `wrap_for_training` env whose auto-reset keeps the
 batch running after a done; the tally still ends at the first done).
+
+On several devices (`dpc_mjx.devices`) `start` puts the batch on the batch sharding, padded to a
+multiple of the device count with copies of its first envs; the jitted chunks then step each
+env on its device, `chunks` and `run_episodes` gather the results to every process and drop the
+padding. The same seed gives the same envs on any number of devices and processes.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import numpy as np
 from brax.envs.base import Env, State
 from flax import struct
 
+from dpc_mjx import devices
 from dpc_mjx.errors import DpcError
 from dpc_mjx.progress import bar
 
@@ -114,17 +120,42 @@ def make_chunk(step: Step, policy: Policy, chunk: int, record: Record | None = N
     `key`."""
 
     def run(carry: Carry, key: jax.Array):
-        return scan_steps(step, policy, carry, jax.random.split(key, chunk), record)
+        carry, records = scan_steps(step, policy, carry, jax.random.split(key, chunk), record)
+        # several devices: the carry stays on the batch sharding it came in (one compile)
+        return devices.constrain(carry, len(carry[1].ret)), records
 
     return jax.jit(run)
 
 
-def start(env: Env, batch: int, seed: int) -> tuple[Carry, jax.Array]:
+def batch_fns(env: Env) -> tuple[Callable[[jax.Array], State], Step]:
+    """The batch's reset (keys (B, 2) -> State (B, ...)) and step: `jax.vmap` of the env's
+    own, or an env's that is batched already (`batched = True`: `model_batch.ModelBatchEnv`)."""
+    if getattr(env, "batched", False):
+        return env.reset, env.step
+    return jax.vmap(env.reset), jax.vmap(env.step)
+
+
+def start(env: Env, batch: int, seed: int, groups: int = 1) -> tuple[Carry, jax.Array]:
     """The batch reset from `seed` (env i from the i-th key of one split) with a zero tally
-    (keeping the env's `TASK_MEASURES`), and the key that the chunks continue from."""
+    (keeping the env's `TASK_MEASURES`), and the key that the chunks continue from. With
+    `groups` > 1 the batch is `groups` repeats of the same `batch // groups` episodes (env
+    g * E + i from the i-th key of a split in E): a sweep meets the same episodes at every
+    grid point, and the episodes of a `groups = 1` batch of E. On several devices the batch
+    is sharded over them, padded to `devices.padded(batch)` envs with copies of the first ones
+    (drop them with `[:batch]` after `devices.to_host`); a batched env (one model per env) is
+    not padded: its batch must be a multiple of the device count."""
+    if groups < 1 or batch % groups:
+        raise DpcError(f"A batch of {batch} envs does not split into {groups} equal groups.")
     key, k_reset = jax.random.split(jax.random.PRNGKey(seed))
-    state = jax.jit(jax.vmap(env.reset))(jax.random.split(k_reset, batch))
-    return (state, Tally.zeros(batch, getattr(env, "TASK_MEASURES", ()))), key
+    keys = jp.tile(jax.random.split(k_reset, batch // groups), (groups, 1))  # (batch, 2)
+    if getattr(env, "batched", False):  # one model per env: no copies to pad with
+        devices.check_divisible(batch, "a batch of models (grid points x episodes)")
+    size = devices.padded(batch)
+    keys = devices.shard(devices.pad(keys, size), size)
+    # every leaf on the batch sharding (constant leaves, e.g. zeros, would come out replicated)
+    state = jax.jit(lambda k: devices.constrain(batch_fns(env)[0](k), size))(keys)
+    tally = devices.shard(Tally.zeros(size, getattr(env, "TASK_MEASURES", ())), size)
+    return (state, tally), key
 
 
 def chunks(run_chunk: Callable, carry: Carry, key: jax.Array) -> Iterator[tuple[Carry, Any]]:
@@ -134,7 +165,7 @@ def chunks(run_chunk: Callable, carry: Carry, key: jax.Array) -> Iterator[tuple[
         key, k = jax.random.split(key)
         carry, records = run_chunk(carry, k)
         jax.block_until_ready(carry)
-        yield carry, jax.device_get(records)
+        yield carry, devices.to_host(records)
 
 
 def record_episodes(
@@ -144,9 +175,12 @@ def record_episodes(
     auto-reset) for `steps` env steps, from the reset on (`record(reset, reset)` first): the
     records as numpy, each (steps + 1, episodes, ...). One jitted scan of `steps` steps."""
     carry, key = start(env, episodes, seed)
-    first = jax.device_get(jax.jit(record)(carry[0], carry[0]))
-    _, rest = jax.device_get(make_chunk(jax.vmap(env.step), policy, steps, record)(carry, key))
-    return jax.tree.map(lambda f, r: np.concatenate([np.asarray(f)[None], r]), first, rest)
+    first = devices.to_host(jax.jit(record)(carry[0], carry[0]))
+    _, rest = devices.to_host(make_chunk(batch_fns(env)[1], policy, steps, record)(carry, key))
+    # the padding of several devices dropped
+    return jax.tree.map(
+        lambda f, r: np.concatenate([f[None, :episodes], r[:, :episodes]]), first, rest
+    )
 
 
 def run_episodes(
@@ -158,23 +192,25 @@ def run_episodes(
     chunk: int = 50,
     progress: bool = False,
     desc: str = "episodes",
+    groups: int = 1,
 ) -> dict[str, np.ndarray]:
     """Run `episodes` envs (one batch, no auto-reset) for `steps` env steps; per-episode arrays
     (episodes,): 'return', 'fell' (bool), 'nan' (bool), 'length' (steps until done,
     inclusive), 'measured' (steps before the done), the `ERROR_SUMS` over the measured
     steps and the env's `TASK_MEASURES` at each episode's end. Steps run in jitted chunks of
-    the largest divisor of `steps` not above `chunk`."""
+    the largest divisor of `steps` not above `chunk`. `groups`: the batch is that many repeats
+    of the same episodes (`start`; sweeps)."""
     if episodes < 1 or steps < 1 or chunk < 1:
         raise DpcError(
             f"run_episodes needs episodes, steps and chunk >= 1, got {episodes}, {steps}, {chunk}."
         )
     chunk = max(c for c in range(1, min(chunk, steps) + 1) if steps % c == 0)
-    carry, key = start(env, episodes, seed)
-    run_chunk = make_chunk(jax.vmap(env.step), policy, chunk)
+    carry, key = start(env, episodes, seed, groups)
+    run_chunk = make_chunk(batch_fns(env)[1], policy, chunk)
     with bar(episodes * steps, desc, "step", progress) as pbar:
         for _, (carry, _) in zip(range(steps // chunk), chunks(run_chunk, carry, key)):
             pbar.update(episodes * chunk)
-    t = jax.device_get(carry[1])
+    t = jax.tree.map(lambda x: x[:episodes], devices.to_host(carry[1]))  # padding dropped
     return {
         "return": np.asarray(t.ret),
         "length": np.asarray(t.length),

@@ -1,4 +1,5 @@
-"""The Unitree A1, assembled with `mujoco.MjSpec` from the example-robot-data URDF.
+"""The Unitree A1, assembled with `mujoco.MjSpec` from its URDF (example-robot-data's, shipped in
+`dpc_mjx/descriptions/`: no wheel needed).
 
 Floating base, 12 torque-controlled leg joints (URDF limits and effort), a home keyframe
 (added by `dpc_mjx.robots.build` once the arms are on), foot and IMU sites, IMU-like sensors, and

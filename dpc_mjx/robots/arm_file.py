@@ -85,7 +85,7 @@ def read(
 ) -> ArmFile:
     """Read and check an arm file (see the module doc); `DpcError` naming the problem and the fix.
 
-    `keep_meshes=False` drops every mesh (the library's wheel arms, whose meshes are COLLADA).
+    `keep_meshes=False` drops every mesh (the named arms, whose meshes are COLLADA or unused).
     """
     p, kind = check_path(path)
     cached = _read_cached(p, p.stat().st_mtime_ns, kind, ee_body, keep_meshes)
@@ -212,7 +212,7 @@ def _prepare_urdf(p, tree, keep_meshes) -> tuple[str, str, list[str], bool]:
 
 def _urdf_geometry(p: pathlib.Path, links: dict, keep_meshes: bool) -> list[str]:
     """Resolve the links' mesh paths and drop what is not drawn: meshes MuJoCo cannot read
-    (returned), a link's <collision>s where it has <visual>s; with `keep_meshes=False` (the wheel
+    (returned), a link's <collision>s where it has <visual>s; with `keep_meshes=False` (the named
     arms) every <visual> and mesh, keeping the primitive collision shapes."""
     dropped = []
     for link in links.values():

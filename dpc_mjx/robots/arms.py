@@ -2,8 +2,9 @@
 
 `ArmSpec` is a WidowX-like parametric arm built from primitives: waist (yaw), shoulder, elbow and
 wrist (pitch) hinges plus a one-finger parallel gripper. `UrdfArm` is an arm from a file: the
-example-robot-data wheel's SO-100 and Unitree Z1 (structurally different, used to test transfer)
-or a user's own URDF or MJCF file (`dpc_mjx.robots.arm_file`).
+SO-100 and Unitree Z1 (the example-robot-data wheel's URDFs, shipped in `dpc_mjx/descriptions/`;
+structurally different, used to test transfer) or a user's own URDF or MJCF file
+(`dpc_mjx.robots.arm_file`; another of the optional wheel's: `dpc_mjx.assets.wheel_urdf`).
 
 Every arm is built as its own `MjSpec` whose root body (the arm's base, fixed to the trunk) holds a
 site `mount` with a force and a torque sensor, and is attached to the trunk with a name prefix
@@ -156,8 +157,8 @@ class ArmSpec:
 
 @dataclasses.dataclass(frozen=True)
 class UrdfArm:
-    """An arm from a file, attached at `mount`: a name the library knows ('so100', 'z1', URDFs
-    of the example-robot-data wheel) or the path of your own URDF or MJCF file
+    """An arm from a file, attached at `mount`: a name the library knows ('so100', 'z1', shipped
+    copies of the example-robot-data wheel's URDFs) or the path of your own URDF or MJCF file
     (`dpc_mjx.robots.arm_file` says what the file needs and what is inferred).
 
     ee_body and ee_offset (m, in ee_body's frame): where the end effector is; home: (joint, value)
@@ -174,7 +175,7 @@ class UrdfArm:
 
     @property
     def is_file(self) -> bool:
-        """Whether this arm is a user's file rather than a named wheel arm."""
+        """Whether this arm is a user's file rather than a named arm."""
         return self.urdf not in URDF_ARMS
 
     @property

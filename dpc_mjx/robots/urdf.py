@@ -1,9 +1,11 @@
-"""Load a URDF from the example-robot-data wheel into an `mujoco.MjSpec`, without its meshes.
+"""Load one of the URDFs shipped with dpc_mjx (`dpc_mjx.assets`, copies of the example-robot-data
+wheel's) into an `mujoco.MjSpec`, without its meshes.
 
-The wheel's visual meshes are COLLADA (.dae), which MuJoCo cannot read, and mesh collision shapes
-are costly in MJX. We therefore drop every <visual> element and every mesh collision shape, and keep
-the URDF's primitive collision shapes (boxes, cylinders, spheres) as *visual-only* geoms, so the
-model still renders as a recognisable robot. The inertial properties come from the URDF unchanged.
+The visual meshes are COLLADA (.dae), which MuJoCo cannot read, and mesh collision shapes are
+costly in MJX (and not shipped). We therefore drop every <visual> element and every mesh collision
+shape, and keep the URDF's primitive collision shapes (boxes, cylinders, spheres) as *visual-only*
+geoms, so the model still renders as a recognisable robot. The inertial properties come from the
+URDF unchanged.
 """
 
 from __future__ import annotations

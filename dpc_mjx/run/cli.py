@@ -9,6 +9,8 @@
     dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
                                        (--engine native: MuJoCo C instead of MJX)
     dpc-mjx sim2sim --export DIR       the same cells in MJX and in native MuJoCo, side by side
+    dpc-mjx sweep --upper-arm 0.10:0.30:8 --gripper-mass 0.1:0.6:8   every controller over a
+                                       grid of arms, one batched model (CSV and heatmaps)
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
     dpc-mjx render --out clip.mp4      a video of an episode (--compare mbc dpc: side by side)
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
@@ -52,7 +54,14 @@ def _run_config(args: argparse.Namespace):
         named["sac.num_timesteps"] = args.timesteps
     if getattr(args, "episodes", None):
         named["eval_episodes"] = args.episodes
-    return recipe(getattr(args, "recipe", "default")).replace(**named, **_parse_sets(args.set))
+    device = getattr(args, "device", "cpu")
+    if device == "auto":
+        import jax
+
+        device = jax.default_backend()
+        print(f"device: {device} ({jax.device_count()} x {jax.devices()[0].device_kind})")
+    base = recipe(getattr(args, "recipe", "default"), device)
+    return base.replace(**named, **_parse_sets(args.set))
 
 
 def _train(args: argparse.Namespace) -> None:
@@ -112,6 +121,19 @@ def _sim2sim(args: argparse.Namespace) -> None:
     from dpc_mjx.run.sim2sim import sim2sim
 
     sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=_parse_sets(args.env))
+
+
+def _sweep(args: argparse.Namespace) -> None:
+    from dpc_mjx.run.sweep import sweep
+
+    names = ("controllers", "task", "episodes", "steps", "seed", "out")
+    sweep(
+        args.export,
+        upper_arm=args.upper_arm,
+        gripper_mass=args.gripper_mass,
+        env=_parse_sets(args.env),
+        **{k: getattr(args, k) for k in names},
+    )
 
 
 def _render(args: argparse.Namespace) -> None:
@@ -176,6 +198,12 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="dpc-mjx", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    runs = parser.add_argument_group(
+        "several processes (docs/scaling.md; before the command, the same in every process)"
+    )
+    runs.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address, or auto")
+    runs.add_argument("--num-processes", type=int, metavar="N")
+    runs.add_argument("--process-id", type=int, metavar="I", help="0 .. N-1, one per process")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def run_options(p, resume: bool):
@@ -188,6 +216,13 @@ def _parser() -> argparse.ArgumentParser:
             default="default",
             help="named settings the --set options change: default (the oracle regression), "
             "paper (SAC from a random actor, asymmetric critic)",
+        )
+        p.add_argument(
+            "--device",
+            choices=["auto", "cpu", "gpu"],
+            default="auto",
+            help="settings preset for the accelerator (default auto: the one JAX runs on; "
+            "docs/benchmarks.md, run.config.DEVICE_PRESETS)",
         )
         p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
         if resume:
@@ -276,6 +311,21 @@ def _parser() -> argparse.ArgumentParser:
     eval_options(p)
     p.set_defaults(handler=_sim2sim)
 
+    p = sub.add_parser("sweep", help="every controller over a grid of arm lengths and masses")
+    p.add_argument("--export", help="an export folder (default: the shipped one); its arm")
+    p.add_argument(
+        "--upper-arm", default="0.10:0.30:8", help="upper-arm lengths, m, low:high:count"
+    )
+    p.add_argument("--gripper-mass", default="0.1:0.6:8", help="gripper masses, kg, low:high:count")
+    p.add_argument("--controllers", nargs="+", default=["mbc", "observer", "dpc", "oracle"])
+    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--episodes", type=int, default=16, help="per grid point")
+    p.add_argument("--steps", type=int, help="env steps per episode (default: the task's)")
+    p.add_argument("--seed", type=int, default=1000)
+    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE")
+    p.add_argument("--out", default="runs/sweep", help="folder for the CSVs and heatmaps")
+    p.set_defaults(handler=_sweep)
+
     p = sub.add_parser("export", help="export a run's adapter and policy")
     p.add_argument("--run", required=True)
     p.add_argument("--out", help="export folder (default: run/export)")
@@ -321,9 +371,18 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _join_processes(args: argparse.Namespace) -> None:
+    """`jax.distributed` for a run of several processes (from the options, else the environment:
+    JAX_COORDINATOR_ADDRESS, DPC_NUM_PROCESSES, DPC_PROCESS_ID), before any device is touched."""
+    from dpc_mjx.devices import initialize
+
+    initialize(args.coordinator, args.num_processes, args.process_id)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
+        _join_processes(args)
         args.handler(args)
     except DpcError as e:
         print(f"dpc-mjx: error: {e}", file=sys.stderr)

@@ -55,11 +55,34 @@ RECIPES: dict[str, dict[str, Any]] = {
 }
 
 
-def recipe(name: str) -> RunConfig:
-    """`RunConfig()` with the overrides of the named recipe (`RECIPES`)."""
+# Device presets: dotted overrides for the accelerator JAX runs on (`dpc-mjx train --device`,
+# default: `jax.default_backend()`), applied after the recipe and before `--set`. The CPU preset
+# is the shipped recipe. On a GPU, a batch of envs costs about what one env does up to thousands,
+# so SAC steps 4x the envs per actor step with 4x the gradient steps (the update-to-data ratio,
+# 1/4, and so the learning rule per env step stay those of the recipe; an epoch holds 4x the env
+# steps so that it still runs 256 actor steps) and evaluates on 128 episodes. The adapter's data
+# keeps 64 envs: 100,000 samples over more envs would cut each env's trajectory short of an
+# episode (1,000 steps), and the samples would crowd near the resets.
+DEVICE_PRESETS: dict[str, dict[str, Any]] = {
+    "cpu": {},
+    "gpu": {
+        "sac.num_envs": 256,
+        "sac.grad_updates_per_step": 64,
+        "sac.epoch_steps": 65_536,
+        "sac.eval_envs": 128,
+    },
+}
+
+
+def recipe(name: str, device: str = "cpu") -> RunConfig:
+    """`RunConfig()` with the overrides of the named recipe (`RECIPES`), then those of the
+    device preset `device` ('cpu' or 'gpu', `DEVICE_PRESETS`; 'tpu' takes the GPU's)."""
     if name not in RECIPES:
         raise DpcError(f"Unknown recipe {name!r}; the recipes are {sorted(RECIPES)}.")
-    return RunConfig().replace(**RECIPES[name])
+    preset = "gpu" if device == "tpu" else device
+    if preset not in DEVICE_PRESETS:
+        raise DpcError(f"Unknown device preset {device!r}; choose from {sorted(DEVICE_PRESETS)}.")
+    return RunConfig().replace(**{**RECIPES[name], **DEVICE_PRESETS[preset]})
 
 
 @dataclasses.dataclass(frozen=True)

@@ -87,7 +87,22 @@ def evaluate_env(
     kw = {} if policy is None else {"policy": policy}
     desc = f"{arm} {controller}"
     r = run_episodes(env, episodes, steps, seed=seed, progress=progress, desc=desc, **kw)
-    seconds = time.perf_counter() - t0
+    measures = getattr(env, "TASK_MEASURES", ())
+    return cell_result(arm, controller, r, steps, seed, time.perf_counter() - t0, measures)
+
+
+def cell_result(
+    arm: str,
+    controller: str,
+    r: dict[str, np.ndarray],
+    steps: int,
+    seed: int,
+    seconds: float,
+    measures: tuple[str, ...] = (),
+) -> CellResult:
+    """A cell's figures from the per-episode arrays `r` of `rollout.run_episodes` (each
+    (episodes,)), the task's success measures `measures` among them."""
+    episodes = len(r["return"])
     falls = int(r["fell"].sum())
     mean, lo, hi = mean_ci(r["return"])
     measured = max(float(r["measured"].sum()), 1.0)
@@ -114,7 +129,7 @@ def evaluate_env(
         seed=seed,
         pos_rmse=rms("pos_sq_err"),
         ee_rmse=rms("ee_sq_err"),
-        task={k: mean_ci(r[k]) for k in getattr(env, "TASK_MEASURES", ())},
+        task={k: mean_ci(r[k]) for k in measures},
         per_episode=r,
     )
 

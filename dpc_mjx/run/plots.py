@@ -143,3 +143,40 @@ def latent_by_arm(per_arm: dict[str, tuple[np.ndarray, np.ndarray]], path) -> pa
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def sweep_heatmaps(result, out: str | pathlib.Path) -> dict[str, pathlib.Path]:
+    """Heatmaps of a `run.sweep.SweepResult` over (upper-arm length, gripper mass), one panel
+    per controller: fall rate (sweep_fall_rate.png), mean return (sweep_return.png) and, with
+    MBC and DPC in the sweep, DPC - MBC paired return (sweep_dpc_minus_mbc.png)."""
+    out = pathlib.Path(out)
+    names = list(result.cells)
+    panels = {
+        "fall_rate": ("fall rate", [result.grid(n, "fall_rate") for n in names], names, "Reds"),
+        "return": ("mean return", [result.grid(n, "mean_return") for n in names], names, "viridis"),
+    }
+    if "mbc" in names and "dpc" in names:
+        diff = result.minus_mbc("dpc")[..., 0]
+        panels["dpc_minus_mbc"] = ("DPC - MBC return (paired)", [diff], ["dpc - mbc"], "RdBu")
+    paths = {}
+    for key, (label, grids, titles, cmap) in panels.items():
+        fig, axes = plt.subplots(1, len(grids), figsize=(3.4 * len(grids) + 0.8, 3.3))
+        axes = np.atleast_1d(axes)
+        lo, hi = min(g.min() for g in grids), max(g.max() for g in grids)
+        if cmap == "RdBu":  # differences: white at 0
+            hi = max(abs(lo), abs(hi), 1e-9)
+            lo = -hi
+        for ax, g, title in zip(axes, grids, titles):
+            im = ax.imshow(g, origin="lower", aspect="auto", cmap=cmap, vmin=lo, vmax=hi)
+            ax.set_xticks(range(len(result.gripper_mass)))
+            ax.set_xticklabels([f"{m:.2f}" for m in result.gripper_mass], rotation=90, fontsize=7)
+            ax.set_yticks(range(len(result.upper_arm)))
+            ax.set_yticklabels([f"{u:.3f}" for u in result.upper_arm], fontsize=7)
+            ax.set_xlabel("gripper mass (kg)")
+            ax.set_title(title)
+        axes[0].set_ylabel("upper-arm length (m)")
+        fig.colorbar(im, ax=list(axes), label=label, shrink=0.9)
+        fig.savefig(out / f"sweep_{key}.png", dpi=120, bbox_inches="tight")
+        plt.close(fig)
+        paths[f"heatmap {key}"] = out / f"sweep_{key}.png"
+    return paths

@@ -10,6 +10,11 @@ buffer holds `min_replay_size` transitions), the critic warm-up (`actor_warmup_s
 initial temperature, and `evaluate`: deterministic episodes (actions times a `gate`, 0 giving the
 same episodes with u = 0) on the library's one rollout core, `envs.rollout.scan_steps`.
 
+On several devices of its process (`devices.mesh(local=True)`) the env batch is sharded over them:
+each device steps its envs (`devices.constrain` on the env state after every step), the networks,
+the replay buffer and the gradient steps are replicated (the transitions gathered into the
+buffer). `num_envs` must be a multiple of the device count; the evaluation pads `eval_envs`.
+
 What an epoch carries (`Carry`) is a `flax.struct.dataclass` pytree: it crosses `jax.jit`, and a
 checkpoint (`sac.checkpoint`) holds all of it. The host loop around these pieces is `sac.train`.
 """
@@ -30,6 +35,7 @@ from brax.training.agents.sac import networks as sac_networks
 from brax.training.types import Transition
 from flax import struct
 
+from dpc_mjx import devices
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.wrappers import wrap_for_training
 from dpc_mjx.sac.config import SacConfig
@@ -113,6 +119,8 @@ def make_trainer(env, config: SacConfig) -> Trainer:
     `config.critic_privileged`, the trainer extends its observation with the privileged values
     for the critics, `PrivilegedCriticWrapper`)."""
     config.validate()
+    mesh = devices.mesh(local=True)  # SAC trains within one process, on its own devices
+    devices.check_divisible(config.num_envs, "sac.num_envs", mesh)
     policy_obs_size = env.observation_size  # the actor's input
     if config.critic_privileged:  # the privileged values come from the DpcEnv inside
         env = PrivilegedCriticWrapper(env)
@@ -172,13 +180,15 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         return Carry(training, buffer.init(k_buf), key, jp.zeros((), jp.int32), best)
 
     def reset(key: jax.Array):
-        return batched.reset(jax.random.split(key, config.num_envs))
+        state = batched.reset(jax.random.split(key, config.num_envs))
+        return devices.constrain(state, config.num_envs, mesh)
 
     def experience(ts: TrainingState, env_state, buf, key):
         policy = make_policy((ts.normalizer, ts.policy_params))
         env_state, tr = acting.actor_step(
             batched, env_state, policy, key, extra_fields=("truncation",)
         )
+        env_state = devices.constrain(env_state, config.num_envs, mesh)  # each env on its device
         normalizer = ts.normalizer
         if config.normalize_observations:
             normalizer = running_statistics.update(normalizer, tr.observation)
@@ -289,15 +299,20 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         """`eval_envs` episodes of the deterministic policy (actions x `gate`), ended at their
         first done."""
         policy = make_policy((ts.normalizer, ts.policy_params), deterministic=True)
-        state = jax.vmap(env.reset)(jax.random.split(key, config.eval_envs))
-        carry = (state, rollout.Tally.zeros(config.eval_envs))
+        n, size = config.eval_envs, devices.padded(config.eval_envs, mesh)  # copies past n
+        keys = devices.pad(jax.random.split(key, n), size)
+        state = devices.constrain(jax.vmap(env.reset)(keys), size, mesh)
+        carry = (state, rollout.Tally.zeros(size))
 
         def act(obs, _):  # deterministic: the key is not used
             return gate * policy(obs, key)[0]
 
+        def step(state, action):
+            return devices.constrain(jax.vmap(env.step)(state, action), size, mesh)
+
         keys = jax.random.split(key, eval_steps)
-        (_, tally), _ = rollout.scan_steps(jax.vmap(env.step), act, carry, keys)
-        return {"return": jp.mean(tally.ret), "fall_rate": jp.mean(tally.fell)}
+        (_, tally), _ = rollout.scan_steps(step, act, carry, keys)
+        return {"return": jp.mean(tally.ret[:n]), "fall_rate": jp.mean(tally.fell[:n])}
 
     return Trainer(
         config=config,
