@@ -36,7 +36,7 @@ from flax import struct
 
 from dpc_mjx.robots.a1 import FOOT_RADIUS
 
-GRAVITY = jp.array([0.0, 0.0, -9.81])  # m/s^2, world
+GRAVITY = np.array([0.0, 0.0, -9.81], np.float32)  # m/s^2, world (numpy: no device at import)
 N_STATE = 18
 
 
