@@ -18,13 +18,14 @@ from mujoco import mjx
 
 
 def put_model(model: mujoco.MjModel) -> mjx.Model:
-    """The model on the default JAX device, with MJX's pure-JAX implementation."""
-    return mjx.put_model(model, impl="jax")
+    """The model on this process's first device (in a run of several processes,
+    `jax.devices()[0]` is process 0's), with MJX's pure-JAX implementation."""
+    return mjx.put_model(model, impl="jax", device=jax.local_devices()[0])
 
 
 def commit(tree):
-    """Commit every array of a pytree to the default device (see the module docstring)."""
-    return jax.device_put(tree, jax.devices()[0])
+    """Commit every array of a pytree to this process's first device (the module docstring)."""
+    return jax.device_put(tree, jax.local_devices()[0])
 
 
 def batched_data(

@@ -5,7 +5,8 @@ and over 2 local processes (`jax.distributed`) gives the 1-device episodes.
 so every sharded run is a subprocess running this file (`python tests/test_devices.py ...`, the
 `_worker` below), which writes its gathered per-episode arrays to an .npz. The default tests use
 `ToyEnv` (a brax-API env that compiles in a second: the sharding, padding and gathering are the
-rollout core's, not the env's); the slow ones run the reaching task's MJX env, collection and SAC.
+rollout core's and SAC's, not the env's); the slow ones run the reaching task's MJX env
+(evaluation, collection, SAC).
 """
 
 from __future__ import annotations
@@ -274,8 +275,7 @@ def test_two_local_processes_gather_the_one_process_result(tmp_path):
         _assert_same_episodes(r, reference)
 
 
-@pytest.mark.slow  # ~35 s: two short SAC runs of the toy env (one in a subprocess)
-def test_sac_sharded_over_two_devices_learns_as_on_one(tmp_path):
+def test_sac_sharded_over_two_devices_learns_as_on_one(tmp_path):  # ~20 s: 2 toy SAC runs
     """Not bit for bit (the normaliser's sums and the buffer's gathering run across devices),
     but the same starting actor scores the same, and both runs learn the task."""
     (sharded,) = _results(_launch(tmp_path, "sac-toy", 1, 2))

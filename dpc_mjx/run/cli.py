@@ -297,7 +297,7 @@ def _parser() -> argparse.ArgumentParser:
             ".csv)",
         )
 
-    p = sub.add_parser("eval", help="MBC / observer / DPC / oracle, 95% intervals")
+    p = sub.add_parser("eval", help="MBC / observer / DPC / oracle, 95%% intervals")
     eval_options(p)
     p.add_argument(
         "--engine",
