@@ -68,8 +68,8 @@ def balance_problems():
     states = balance.sample_states(np.random.default_rng(0), N_PROBLEMS)
     prob = _build_batch(states)
     P, q, G, h = (np.asarray(a) for a in (prob.P, prob.q, prob.G, prob.h))
-    _, j_star = osqp_reference(P, q, G, h)
-    return states, prob, j_star
+    x_star = osqp_reference(P, q, G, h)
+    return states, prob, x_star
 
 
 _solve_batch_pattern = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=balance.G_PATTERN)))
@@ -78,9 +78,9 @@ _solve_batch_pattern = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=balanc
 @pytest.mark.parametrize("sparse", [False, True], ids=["dense", "G_PATTERN"])
 def test_balance_qps_match_osqp(balance_problems, sparse):
     """Dense, and with the pattern of G the controller passes (balance.G_PATTERN)."""
-    states, prob, j_star = balance_problems
+    states, prob, x_star = balance_problems
     res = (_solve_batch_pattern if sparse else _solve_batch)(prob.P, prob.q, prob.G, prob.h)
-    check_against_reference(res, (prob.P, prob.q, prob.G, prob.h), j_star)
+    check_against_reference(res, (prob.P, prob.q, prob.G, prob.h), x_star)
     # swing feet: the optimum is exactly 0; the float32 solve leaves them tiny
     swing = ~np.asarray(states["contact"])
     x = np.asarray(res.x).reshape(-1, 4, 3)

@@ -12,7 +12,9 @@ shipped then, which is gone.
 
 Seed 4242 chose nothing. The episodes are short (100 env steps, 2 s), so that a change of
 arithmetic shows as a small drift of the continuous metrics rather than as other episodes; on
-one machine the evaluation is deterministic and the match is exact. Re-record the second file
+one machine the evaluation is deterministic and the match is exact. Both files name the jax they
+were recorded with (the pinned one, constraints.txt): another jax compiles other float32 code,
+and is held to wider, measured tolerances (`make test-latest`). Re-record the second file
 (only after a deliberate change of the shipped export) with
 `python tests/test_eval_regression.py --record`.
 """
@@ -22,6 +24,7 @@ import json
 import pathlib
 import sys
 
+import jax
 import numpy as np
 import pytest
 
@@ -34,9 +37,16 @@ DATA = pathlib.Path(__file__).parent / "data"
 EXACT = DATA / "eval_regression.json"
 SHIPPED_RECORDING = DATA / "eval_regression_shipped.json"
 SEED, EPISODES, STEPS = 4242, 4, 100
-# Relative tolerance of returns and error sums: exact on the recording machine; another CPU's
-# XLA code may round differently, and 2 s of walking grows a 1e-7 difference to ~1e-5.
+# Relative tolerance of returns and error sums under the recording's jax: exact on the recording
+# machine; another CPU's XLA code may round differently, and 2 s of walking grows a 1e-7
+# difference to ~1e-5.
 RTOL = 1e-4
+# Under another jax (XLA fuses the float32 QP and physics differently), measured on jax 0.10.2
+# against the 0.9.2 recordings: returns within 1.7e-4, the squared-error sums within 1.3e-2
+# (an error sum is a sum of small squares over 100 steps, which amplifies a rounding
+# difference). Falls and lengths stay exact under every jax.
+RTOL_OTHER_JAX = {"return": 1e-3}
+RTOL_OTHER_JAX_SUMS = 3e-2  # every other continuous metric
 ATOL = 1e-6  # for sums that are ~0 (an episode without error)
 # The env options of the 84660d8 recording: the reaching task then, with exact sensors
 EXACT_SENSORS = {"sensor_noise": 0.0, "sensor_delay": 0}
@@ -48,13 +58,22 @@ def _recording(path: pathlib.Path) -> dict:
     return recording["per_episode"]
 
 
-def _assert_as_recorded(cells, recording: dict) -> None:
+def _rtol(key: str, path: pathlib.Path) -> float:
+    """The relative tolerance of one metric against the recording at path."""
+    if jax.__version__ == json.loads(path.read_text())["jax"]:
+        return RTOL
+    if key in ("fell", "length"):
+        return 0.0
+    return RTOL_OTHER_JAX.get(key, RTOL_OTHER_JAX_SUMS)
+
+
+def _assert_as_recorded(cells, recording: dict, path: pathlib.Path) -> None:
     assert [c.controller for c in cells] == list(recording)
     for cell in cells:
         for key, expected in recording[cell.controller].items():
             got = np.asarray(cell.per_episode[key], float)
             np.testing.assert_allclose(
-                got, expected, rtol=RTOL, atol=ATOL, err_msg=f"{cell.controller} {key}"
+                got, expected, rtol=_rtol(key, path), atol=ATOL, err_msg=f"{cell.controller} {key}"
             )
 
 
@@ -84,16 +103,17 @@ def evaluated(tmp_path_factory):
 
 def test_shipped_export_evaluates_as_recorded(evaluated):
     cells, recording, _ = evaluated
-    _assert_as_recorded(cells, recording)
+    _assert_as_recorded(cells, recording, SHIPPED_RECORDING)
 
 
 @pytest.mark.slow
 def test_shipped_export_evaluates_as_recorded_under_the_observer_and_the_oracle():
     recording = _recording(SHIPPED_RECORDING)
     others = {c: r for c, r in recording.items() if c not in DEFAULT_CONTROLLERS}
-    _assert_as_recorded(_evaluate_shipped(controllers=list(others)), others)
+    _assert_as_recorded(_evaluate_shipped(controllers=list(others)), others, SHIPPED_RECORDING)
 
 
+@pytest.mark.slow  # a third evaluation's compile (~2 min on 2 cores); `make test-all`
 def test_exact_sensors_evaluate_as_the_envs_before_the_sensor_model():
     recording = {"mbc": _recording(EXACT)["mbc"]}  # one controller shows the envs unchanged
     cells = evaluate(
@@ -105,7 +125,7 @@ def test_exact_sensors_evaluate_as_the_envs_before_the_sensor_model():
         overrides=EXACT_SENSORS,
         progress=False,
     )
-    _assert_as_recorded(cells, recording)
+    _assert_as_recorded(cells, recording, EXACT)
 
 
 def test_eval_writes_one_csv_row_per_episode(evaluated):
@@ -147,6 +167,7 @@ if __name__ == "__main__" and sys.argv[1:] == ["--record"]:
             {
                 "recorded": f"{datetime.date.today()}, on top of {commit}",
                 "command": "python tests/test_eval_regression.py --record",
+                "jax": jax.__version__,
                 "seed": SEED,
                 "episodes": EPISODES,
                 "steps": STEPS,

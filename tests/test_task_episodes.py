@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 import pytest
 from brax.envs.base import State
+from helpers import FAST_COMPILE
 from mujoco import mjx
 
 import dpc_mjx
@@ -36,7 +37,7 @@ _LOAD = 0.5  # kg added to the lifted ball
 )
 def test_object_tasks_draw_their_episodes_from_the_seed(task, arm, n_task):
     env = dpc_mjx.make(f"a1_arm/{task}", arm=arm, engine="native")
-    reset = jax.jit(jax.vmap(env.reset))
+    reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)  # called once
     keys = jax.random.split(jax.random.PRNGKey(0), _EPISODES)
     s = jax.device_get(reset(keys))
     dist = s.info["dist"]
@@ -121,7 +122,10 @@ def test_an_objects_added_weight_loads_the_arm_by_m_g():
             s = jax.vmap(env.step)(s, action)
             return s, s.info["privileged"][:, 2]  # u_oracle f_z, N, world
 
-        _, f_z = jax.jit(lambda s, run=run: jax.lax.scan(run, s, None, length=25))(s)
+        steps = jax.jit(
+            lambda s, run=run: jax.lax.scan(run, s, None, length=25), compiler_options=FAST_COMPILE
+        )
+        _, f_z = steps(s)
         mounts.append(np.asarray(f_z))
     change = float(np.mean(mounts[1] - mounts[0]))
     assert change == pytest.approx(-_LOAD * GRAVITY, rel=_LOAD_TOL)
