@@ -28,7 +28,9 @@ _BATCHED_CALLS = 6  # x 50 steps = 1.2 s
 _G = 9.81
 
 
-_BREADTH = ("none", "longer", "heavier")  # regular's structure, or stepped in test_envs: test-all
+# test-all only: regular's structure (longer, heavier), stepped in test_envs (none), or URDF arms
+# whose models tests/test_assets_offline.py builds and steps in MuJoCo C (so100, z1)
+_BREADTH = ("none", "longer", "heavier", "so100", "z1")
 
 
 @pytest.fixture(
