@@ -139,17 +139,6 @@ SAC_TOY = dict(  # 4 epochs of 64 actor steps x 8 envs: the toy task is learned 
     eval_envs=5,  # padded to 6 on 2 devices
     learning_rate=1e-3,
 )
-SAC_REACHING = dict(  # tests/test_sac.py's: 3 epochs of 32 actor steps x 8 envs
-    num_timesteps=768,
-    num_envs=8,
-    batch_size=32,
-    grad_updates_per_step=2,
-    min_replay_size=128,
-    max_replay_size=2048,
-    epoch_steps=256,
-    eval_every=1,
-    eval_envs=2,
-)
 
 
 def _sac(kind: str) -> dict:
@@ -159,17 +148,10 @@ def _sac(kind: str) -> dict:
 
     if kind == "sac-toy":
         env, config = ToyEnv(), SacConfig(**SAC_TOY)
-    else:
-        from dpc_mjx.adapter import AdapterConfig, EncoderState, Normalizer
-        from dpc_mjx.adapter.networks import encoder_module
-        from dpc_mjx.envs.registry import make
-        from dpc_mjx.sac import LatentObsWrapper
+    else:  # tests/test_sac.py's env and config (3 epochs of 32 actor steps x 8 envs)
+        from test_sac import _CONFIG, reaching_latent_env
 
-        dpc = make("a1_arm/reaching", arm="regular", episode_length=100)
-        n_in = dpc.obs_layout.encoder_size
-        params = encoder_module(AdapterConfig()).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))
-        encoder = EncoderState(params, Normalizer(jp.zeros(n_in), jp.ones(n_in)))
-        env, config = LatentObsWrapper(dpc, AdapterConfig(), encoder), SacConfig(**SAC_REACHING)
+        env, config = reaching_latent_env()[1], _CONFIG
     trainer = make_trainer(env, config)
     carry = trainer.init(jax.random.PRNGKey(config.seed))
     epoch = trainer.compiled("epoch", carry, trainer.reset(jax.random.PRNGKey(0)))

@@ -53,14 +53,20 @@ class _Killed(Exception):
     pass
 
 
-@pytest.fixture(scope="module")
-def latent_env():
-    env = dpc_mjx.make("a1_arm/reaching", arm="regular", episode_length=100)  # short evaluations
+def reaching_latent_env():
+    """The reaching env (regular arm, 100-step episodes: short evaluations) and the same env seen
+    through an untrained encoder, `[s_body, z]` (tests/test_devices.py runs it sharded)."""
+    env = dpc_mjx.make("a1_arm/reaching", arm="regular", episode_length=100)
     config = AdapterConfig()
     n_in = env.obs_layout.encoder_size  # [s_body, s_arm, p_arm]
     params = encoder_module(config).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))
     encoder = EncoderState(params=params, input_norm=Normalizer(jp.zeros(n_in), jp.ones(n_in)))
     return env, LatentObsWrapper(env, config, encoder)
+
+
+@pytest.fixture(scope="module")
+def latent_env():
+    return reaching_latent_env()
 
 
 def test_latent_env_shows_the_policy_body_state_and_z(latent_env):
