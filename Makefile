@@ -73,8 +73,10 @@ bench: $(BENCH_STAMP)
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf
 
+# ruff, then the layers of the README's Architecture (import-linter's contract in pyproject.toml)
 lint: $(STAMP)
 	$(BIN)/ruff check dpc_mjx tests experiments
+	$(BIN)/lint-imports --no-logo --cache-dir .cache/import-linter
 
 clean:
 	rm -rf $(VENV) $(LATEST) .cache

@@ -56,13 +56,16 @@ from dpc_mjx import io
 from dpc_mjx.control import estimator, gait
 from dpc_mjx.control.controller import ControllerState
 from dpc_mjx.control.state import read_state
+from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.observations import observation
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.errors import DpcError
+from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import arm_name
 
-CONTROLLERS = ("dpc", "mbc", "observer")  # the oracle needs a force sensor no robot has
+# the oracle needs a force sensor no robot has
+CONTROLLERS = (Controller.DPC, Controller.MBC, Controller.OBSERVER)
 # mjx.Data fields MuJoCo C computes from the measured attitude and joints (trunk origin at 0)
 KINEMATICS = ("xpos", "xmat", "xipos", "site_xpos", "site_xmat", "subtree_com", "cdof")
 
@@ -100,24 +103,23 @@ class Deployment:
         self,
         export: str | pathlib.Path | None = None,
         arm: str | None = None,
-        controller: str = "dpc",
+        controller: str = Controller.DPC,
         estimator_config: estimator.EstimatorConfig | None = None,
     ):
-        from dpc_mjx.run.pipeline import SHIPPED, env_overrides
-
+        controller = Controller.parse(controller)
         if controller not in CONTROLLERS:
             raise DpcError(
-                f"controller={controller!r} cannot run on a robot; choose one of "
-                f"{list(CONTROLLERS)} (the oracle reads a mount force sensor)."
+                f"controller={controller.value!r} cannot run on a robot; choose one of "
+                f"{[c.value for c in CONTROLLERS]} (the oracle reads a mount force sensor)."
             )
         artefacts = io.load(export or SHIPPED)
         arm = arm or next(iter(artefacts.meta["encoders"]))
         robot_arm = artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
-        env_controller = "policy" if controller == "dpc" else controller
         overrides = {**env_overrides(artefacts), "sensor_noise": 0.0, "sensor_delay": 0}
-        self.env = make("a1_arm/reaching", arm=robot_arm, controller=env_controller, **overrides)
+        self.env = make(DEFAULT_TASK, arm=robot_arm, controller=controller, **overrides)
         self.controller_name = controller
-        self.policy = artefacts.dpc_policy(arm_name(robot_arm)) if controller == "dpc" else None
+        dpc = controller == Controller.DPC
+        self.policy = artefacts.dpc_policy(arm_name(robot_arm)) if dpc else None
         self.estimator_config = estimator_config or estimator.EstimatorConfig()
         model, lay = self.env.model, self.env.lay
         self.arm_joints = tuple(model.joint(model.dof_jntid[i]).name for i in lay.arm_dof)

@@ -1,5 +1,5 @@
 """Minibatch Adam with early stopping, shared by the adapter (`adapter.train`) and the actor's
-warm start (`sac.warm_start`).
+regression on the oracle (`policy.regression`).
 
 One epoch is one jitted `lax.scan` over shuffled minibatches of the training arrays (the last
 partial batch is dropped); after each epoch the loss on the validation arrays is computed, the

@@ -1,83 +1,67 @@
-"""XLA flags this library sets for the CPU backend, before jax starts its backends.
+"""The one XLA flag this library sets, only on the jaxlib versions measured to need it.
 
 `--xla_cpu_enable_concurrency_optimized_scheduler=false`: with XLA's default (the
-concurrency-optimised scheduler), a batched MJX env step, `jax.jit(jax.vmap(env.step))` at
-batch 1024, never finished its first call on jax 0.10.2 on a 2-core CPU (every thread asleep, no
-CPU used for 18 min); with the flag it compiles and runs in 57 s, then 0.57 s a step
+concurrency-optimised scheduler for CPU programs), a batched MJX env step,
+`jax.jit(jax.vmap(env.step))` at batch 1024, stopped for good (every thread asleep, no CPU used)
+in 4 of 7 processes on jaxlib 0.10.2 on a 2-core CPU, and in 0 of 7 with the flag. jaxlib 0.9.2
+(the pinned version) ran the same step with and without it, so it gets nothing
 (docs/decisions.md, "Packaging and versions"). The flag only changes how the CPU compiler orders
-instructions, so GPU programs are unaffected.
+instructions, not its arithmetic, and GPU programs not at all.
 
-Rules (`apply()` runs when this module is imported, first thing in `dpc_mjx/__init__.py`):
-- a flag the user already set in XLA_FLAGS, with any value, is left as it is (so
-  `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=true` turns ours off);
-- a flag is added only if the installed jaxlib knows it: XLA aborts the whole process on an
-  unknown flag, and flags come and go between releases. "Knows" means its name is compiled into
-  jaxlib's shared library (the flag table holds it; found in 20 ms on jaxlib 0.9.2 and 0.10.2);
-- XLA reads XLA_FLAGS once, when the first backend starts (the first array or `jax.devices()`),
-  not at `import jax`; if that already happened, we warn that the flag came too late.
+Rules (`dpc_mjx/__init__.py` calls `apply()` once, first thing; it imports no jax and opens no
+file):
+- XLA_FLAGS set in the environment, to anything (an empty string too), is left byte-identical:
+  the user decides (`XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=true` runs XLA's
+  default);
+- otherwise XLA_FLAGS is set to the flag only if the installed jaxlib's version
+  (`importlib.metadata`) is in `NEEDS_FLAG`, the versions measured to hang without it and to
+  know it (XLA aborts the whole process on a flag it does not know, and flags come and go
+  between releases), and the CPU backend can start (JAX_PLATFORMS unset or naming `cpu`);
+- XLA reads XLA_FLAGS once, when jax starts its first backend (the first array or
+  `jax.devices()`), not at `import jax`. `import dpc_mjx` imports no jax, so importing it first
+  is enough; a process that computed with jax before importing dpc_mjx runs without the flag
+  (jax has no public call that says whether its backends started, so this is not detected).
 """
 
 from __future__ import annotations
 
-import importlib.util
-import mmap
 import os
-import sys
-import warnings
-from pathlib import Path
+from collections.abc import Mapping
+from importlib import metadata
 
-# (name, value) of the flags we add; each entry's reason is in the module docstring.
-FLAGS: tuple[tuple[str, str], ...] = (("xla_cpu_enable_concurrency_optimized_scheduler", "false"),)
+FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
 
-
-def jaxlib_knows(name: str) -> bool:
-    """Whether the installed jaxlib's XLA has the flag `name` (without the leading --)."""
-    spec = importlib.util.find_spec("jaxlib")
-    if spec is None or not spec.submodule_search_locations:
-        return False
-    libraries = [p for d in spec.submodule_search_locations for p in Path(d).glob("*.so")]
-    needle = name.encode()
-    for library in sorted(libraries, key=lambda p: -p.stat().st_size):  # XLA: the largest
-        with open(library, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as m:
-            if m.find(needle) >= 0:
-                return True
-    return False
+# jaxlib versions measured to hang without FLAG and to start with it (docs/decisions.md).
+# Measured without a hang, so not here: 0.9.2. Not measured: every other version.
+NEEDS_FLAG: frozenset[str] = frozenset({"0.10.2"})
 
 
-def is_set(xla_flags: str, name: str) -> bool:
-    """Whether the XLA_FLAGS string `xla_flags` sets `name` (`--name`, `--name=value`)."""
-    return any(f.split("=", 1)[0] == f"--{name}" for f in xla_flags.split())
+def jaxlib_version() -> str | None:
+    """The installed jaxlib's version, None if jaxlib is not installed."""
+    try:
+        return metadata.version("jaxlib")
+    except metadata.PackageNotFoundError:
+        return None
 
 
-def with_flags(xla_flags: str, flags=FLAGS, knows=jaxlib_knows) -> str:
-    """`xla_flags` with every flag of `flags` appended that it does not set and jaxlib knows."""
-    added = [f"--{n}={v}" for n, v in flags if not is_set(xla_flags, n) and knows(n)]
-    return " ".join([xla_flags.strip(), *added]).strip()
+def cpu_backend_allowed(jax_platforms: str | None) -> bool:
+    """Whether JAX_PLATFORMS (`jax_platforms`, None when unset) lets jax start its CPU backend."""
+    if not jax_platforms:
+        return True
+    return "cpu" in (p.strip() for p in jax_platforms.split(","))
+
+
+def flags_for(environ: Mapping[str, str], jaxlib: str | None) -> str | None:
+    """The XLA_FLAGS to set for this environment and jaxlib version, None to set nothing."""
+    if "XLA_FLAGS" in environ or jaxlib not in NEEDS_FLAG:
+        return None
+    if not cpu_backend_allowed(environ.get("JAX_PLATFORMS")):
+        return None
+    return FLAG
 
 
 def apply() -> None:
-    """Add our flags to os.environ["XLA_FLAGS"] (the rules in the module docstring)."""
-    current = os.environ.get("XLA_FLAGS", "")
-    updated = with_flags(current)
-    if updated == current:
-        return
-    os.environ["XLA_FLAGS"] = updated
-    if "jax" in sys.modules and _backends_started():
-        warnings.warn(
-            f"dpc_mjx: jax started its backends before dpc_mjx was imported, so XLA ignores "
-            f"XLA_FLAGS={updated!r}; batched MJX steps may hang on the CPU. Import dpc_mjx "
-            f"first, or set XLA_FLAGS before starting Python.",
-            stacklevel=2,
-        )
-
-
-def _backends_started() -> bool:
-    try:
-        from jax._src import xla_bridge  # private; present in jax 0.9 and 0.10
-
-        return bool(xla_bridge.backends_are_initialized())
-    except (ImportError, AttributeError):
-        return False
-
-
-apply()
+    """Set XLA_FLAGS to `FLAG` where the rules of the module docstring say it is needed."""
+    flags = flags_for(os.environ, jaxlib_version())
+    if flags is not None:
+        os.environ["XLA_FLAGS"] = flags

@@ -5,8 +5,9 @@
 Prints one markdown row: jax version, XLA_FLAGS, batch, compile times, the median and the slowest
 later call, and how many calls finished. A call that takes longer than `--hang-after` seconds
 counts as hung: the row says so and the script exits with status 3. dpc_mjx sets
-`--xla_cpu_enable_concurrency_optimized_scheduler=false` itself (dpc_mjx/xla_flags.py); to see
-the step without it, start with
+`--xla_cpu_enable_concurrency_optimized_scheduler=false` itself where XLA_FLAGS is unset, on the
+jaxlib versions measured to need it (dpc_mjx/xla_flags.py: 0.10.2); to see the step without it,
+start with
 `XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=true` (docs/decisions.md, "Packaging
 and versions").
 """
@@ -17,12 +18,12 @@ import argparse
 import os
 import statistics
 import threading
-import time
 
 import jax
 import jax.numpy as jp
 
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
+from dpc_mjx.timing import timed
 
 HEADER = (
     "| jax | XLA_FLAGS | batch | compile reset (s) | first step (s) | later steps: median (s) "
@@ -32,7 +33,7 @@ HEADER = (
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--task", default=DEFAULT_TASK)
     p.add_argument("--batch", type=int, default=1024)
     p.add_argument("--calls", type=int, default=20, help="env steps after the first")
     p.add_argument("--hang-after", type=float, default=300.0, help="seconds for one call")
@@ -49,8 +50,8 @@ def main() -> None:
             f"| {done} |"
         )
 
-    def timed(fn, *xs):
-        """fn(*xs), blocked on; a watchdog ends the process if it exceeds --hang-after."""
+    def watched(fn, *xs):
+        """(fn(*xs) blocked on, s); a watchdog ends the process if it exceeds --hang-after."""
         finished = threading.Event()
 
         def watchdog():
@@ -59,20 +60,19 @@ def main() -> None:
                 os._exit(3)
 
         threading.Thread(target=watchdog, daemon=True).start()
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(fn(*xs))
+        out, seconds = timed(fn, *xs)
         finished.set()
-        return out, time.perf_counter() - t0
+        return out, seconds
 
     print(HEADER, flush=True)
     env = make(args.task)
     keys = jax.random.split(jax.random.PRNGKey(0), args.batch)
-    state, first["reset"] = timed(jax.jit(jax.vmap(env.reset)), keys)
+    state, first["reset"] = watched(jax.jit(jax.vmap(env.reset)), keys)
     step = jax.jit(jax.vmap(env.step))
     action = jp.zeros((args.batch, env.action_size))
-    state, first["step"] = timed(step, state, action)  # compile and one call
+    state, first["step"] = watched(step, state, action)  # compile and one call
     for _ in range(args.calls):
-        state, seconds = timed(step, state, action)
+        state, seconds = watched(step, state, action)
         times.append(seconds)
     print(row(f"{len(times)} of {args.calls}"), flush=True)
 

@@ -22,7 +22,7 @@ from dpc_mjx.control.closed_loop import init_loop, make_chunk
 from dpc_mjx.control.controller import make_controller
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
-from dpc_mjx.run.bench import time_calls
+from dpc_mjx.timing import time_calls
 
 CHUNK = 50
 

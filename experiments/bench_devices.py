@@ -18,42 +18,40 @@ import json
 import os
 import subprocess
 import sys
-import time
+
+import jax
+
+from dpc_mjx.envs import rollout
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
+from dpc_mjx.timing import Stopwatch, run_calls, timed
 
 _MARK = "ROW "  # a worker's result line
 
 
 def worker(batch: int, chunk: int, calls: int, repeats: int) -> None:
-    import jax
-
-    from dpc_mjx.envs import rollout
-    from dpc_mjx.envs.registry import make
-
-    env = make("a1_arm/reaching", arm="regular", controller="mbc")
-    t0 = time.perf_counter()
-    carry, key = rollout.start(env, batch, seed=0)
-    jax.block_until_ready(carry)
-    reset = time.perf_counter() - t0
+    env = make(DEFAULT_TASK, arm="regular", controller="mbc")
+    (carry, key), reset = timed(rollout.start, env, batch, seed=0)
     run_chunk = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, chunk)
-    t0 = time.perf_counter()
-    compiled = run_chunk.lower(carry, key).compile()
-    compile_s = time.perf_counter() - t0
+    with Stopwatch() as compiling:
+        compiled = run_chunk.lower(carry, key).compile()
     carry = jax.block_until_ready(compiled(carry, key)[0])  # warm-up
+
+    def call(state):
+        carry, key = state
+        key, k = jax.random.split(key)
+        return compiled(carry, k)[0], key
+
     best = float("inf")
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(calls):
-            key, k = jax.random.split(key)
-            carry = compiled(carry, k)[0]
-        jax.block_until_ready(carry)
-        best = min(best, time.perf_counter() - t0)
+        seconds, (carry, key) = run_calls(call, (carry, key), calls)
+        best = min(best, seconds)
     row = {
         "devices": jax.device_count(),
         "batch": batch,
         "envs": carry[0].obs.shape[0],  # padded to a multiple of the devices
         "shards": len(carry[0].obs.sharding.device_set),
         "reset_s": reset,
-        "compile_s": compile_s,
+        "compile_s": compiling.seconds,
         "sps": batch * chunk * calls / best,  # env steps of the episodes asked for
     }
     print(_MARK + json.dumps(row), flush=True)
@@ -84,7 +82,7 @@ def main() -> None:
     if args.worker:
         worker(args.batches[0], args.chunk, args.calls, args.repeats)
         return
-    t0 = time.perf_counter()
+    clock = Stopwatch()
     print(f"{os.cpu_count()} CPUs; the load average (1 min) before each row\n")
     print("| batch | devices | envs per device | load | reset (s) | compile (s) | steps/s | vs 1 |")
     print("|---|---|---|---|---|---|---|---|", flush=True)
@@ -100,7 +98,7 @@ def main() -> None:
                 f"| {r['sps'] / base:.2f} |",
                 flush=True,
             )
-    print(f"\n{time.perf_counter() - t0:.0f} s wall")
+    print(f"\n{clock.elapsed():.0f} s wall")
 
 
 if __name__ == "__main__":

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 import jax
 
 from dpc_mjx.envs import rollout
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.physics import NativePhysics
+from dpc_mjx.timing import time_calls
 
 CHUNK = 10  # env steps per call
 
@@ -30,19 +30,13 @@ HEADER = (
 
 def bench(arm: str, batch: int, calls: int, engine: str, threads: int | None) -> dict:
     """{'compile' (s), 'sps' (env steps/s)} of the reaching env (MBC) at `batch`."""
-    env = make("a1_arm/reaching", arm=arm, controller="mbc", engine=engine)
+    env = make(DEFAULT_TASK, arm=arm, controller="mbc", engine=engine)
     if engine == "native":
         env.physics = NativePhysics(env.model, threads=threads)
     carry, key = rollout.start(env, batch, seed=0)
     run = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, CHUNK)
-    t0 = time.perf_counter()
-    carry = jax.block_until_ready(run(carry, key)[0])
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(calls):
-        carry = run(carry, key)[0]
-    jax.block_until_ready(carry)
-    return {"compile": first, "sps": batch * CHUNK * calls / (time.perf_counter() - t0)}
+    first, per_call, _ = time_calls(lambda c: run(c, key)[0], carry, calls)
+    return {"compile": first, "sps": batch * CHUNK / per_call}
 
 
 def main() -> None:

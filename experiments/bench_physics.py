@@ -11,7 +11,6 @@ contact-rich steady state. Native: a Python loop over mj_step (one core) and muj
 from __future__ import annotations
 
 import argparse
-import time
 
 import jax
 import mujoco
@@ -22,7 +21,7 @@ import dpc_mjx  # noqa: F401  (silences mjx's warp import message)
 from dpc_mjx import sim
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
-from dpc_mjx.run.bench import time_calls
+from dpc_mjx.timing import Stopwatch, time_calls
 
 CHUNK = 50
 
@@ -32,12 +31,12 @@ def native_loop(model, seconds=1.0):
     mujoco.mj_resetDataKeyframe(model, data, 0)
     data.ctrl[:] = home_ctrl(model)
     n = 0
-    t0 = time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
+    clock = Stopwatch()
+    while clock.elapsed() < seconds:
         for _ in range(500):
             mujoco.mj_step(model, data)
         n += 500
-    return n / (time.perf_counter() - t0)
+    return n / clock.elapsed()
 
 
 def native_rollout(model, nthread, nbatch=32, nstep=500):
@@ -50,9 +49,9 @@ def native_rollout(model, nthread, nbatch=32, nstep=500):
         mujoco.mj_getState(model, d, state[i], spec)
     ctrl = np.tile(home_ctrl(model), (nbatch, nstep, 1))
     rollout.rollout(model, datas, state, ctrl)  # warm-up (thread pool, allocation)
-    t0 = time.perf_counter()
-    out, _ = rollout.rollout(model, datas, state, ctrl)
-    rate = nbatch * nstep / (time.perf_counter() - t0)
+    with Stopwatch() as clock:
+        out, _ = rollout.rollout(model, datas, state, ctrl)
+    rate = nbatch * nstep / clock.seconds
     return rate, out
 
 

@@ -26,7 +26,6 @@ import dataclasses
 import importlib.util
 import os
 import sys
-import time
 from collections.abc import Callable
 
 if "--one-core" in sys.argv:  # before JAX (and its thread pool) starts; the flag is in main()
@@ -41,6 +40,7 @@ import scipy.sparse as sp
 from jaxopt import BoxOSQP
 
 from dpc_mjx.control import balance, qp
+from dpc_mjx.timing import Stopwatch, timed
 
 
 def build_problems(n: int, seed: int) -> tuple[np.ndarray, ...]:
@@ -53,21 +53,20 @@ def build_problems(n: int, seed: int) -> tuple[np.ndarray, ...]:
 
 def osqp_solve(P, q, G, h, **settings) -> tuple[np.ndarray, float, float]:
     """One problem with OSQP from Python: x, setup time (incl. CSC conversion), solve time (s)."""
-    t0 = time.perf_counter()
-    solver = osqp.OSQP()
-    solver.setup(
-        sp.csc_matrix(np.triu(P)),
-        q,
-        sp.csc_matrix(G),
-        np.full(h.shape, -np.inf),
-        h,
-        verbose=False,
-        **settings,
-    )
-    t1 = time.perf_counter()
-    res = solver.solve(raise_error=False)
-    t2 = time.perf_counter()
-    return res.x, t1 - t0, t2 - t1
+    with Stopwatch() as setup:
+        solver = osqp.OSQP()
+        solver.setup(
+            sp.csc_matrix(np.triu(P)),
+            q,
+            sp.csc_matrix(G),
+            np.full(h.shape, -np.inf),
+            h,
+            verbose=False,
+            **settings,
+        )
+    with Stopwatch() as solve:
+        res = solver.solve(raise_error=False)
+    return res.x, setup.seconds, solve.seconds
 
 
 def reference(P, q, G, h) -> np.ndarray:
@@ -113,14 +112,10 @@ def time_batched(fn: Callable, args: tuple, repeats: int, budget_s: float):
     they would take longer than budget_s.
     """
     f = jax.jit(jax.vmap(fn))
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(f(*args))
-    first = time.perf_counter() - t0
+    out, first = timed(f, *args)
     times = []
     while len(times) < repeats and (not times or sum(times) + times[0] <= budget_s):
-        t0 = time.perf_counter()
-        jax.block_until_ready(f(*args))
-        times.append(time.perf_counter() - t0)
+        times.append(timed(f, *args)[1])
     return max(first - times[0], 0.0), float(np.median(times)), out
 
 

@@ -18,17 +18,17 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 
 import jax
 import numpy as np
 
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.model_batch import ModelBatchEnv
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
+from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.robots.arms import ArmSpec
 from dpc_mjx.robots.params import batch_arm_params
-from dpc_mjx.run.pipeline import SHIPPED, export_cells
+from dpc_mjx.timing import Stopwatch, run_calls
 
 CHUNK = 50  # env steps per jitted call
 SEED = 0
@@ -36,18 +36,19 @@ SEED = 0
 
 def timed(env, batch: int, steps: int, groups: int = 1) -> tuple[float, float]:
     """(compile s, run s) of `steps` MBC env steps of `batch` envs through the rollout core."""
-    t0 = time.perf_counter()
-    carry, key = rollout.start(env, batch, SEED, groups)
-    run_chunk = rollout.make_chunk(rollout.batch_fns(env)[1], rollout.zero_policy, CHUNK)
-    compiled = run_chunk.lower(carry, key).compile()
-    jax.block_until_ready(carry)
-    compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(steps // CHUNK):
+    with Stopwatch() as compiling:
+        carry, key = rollout.start(env, batch, SEED, groups)
+        run_chunk = rollout.make_chunk(rollout.batch_fns(env)[1], rollout.zero_policy, CHUNK)
+        compiled = run_chunk.lower(carry, key).compile()
+        jax.block_until_ready(carry)
+
+    def call(state):
+        carry, key = state
         key, k = jax.random.split(key)
-        carry, _ = compiled(carry, k)
-    jax.block_until_ready(carry)
-    return compile_s, time.perf_counter() - t0
+        return compiled(carry, k)[0], key
+
+    seconds, _ = run_calls(call, (carry, key), steps // CHUNK)
+    return compiling.seconds, seconds
 
 
 def main() -> None:
@@ -58,7 +59,7 @@ def main() -> None:
     p.add_argument("--extrapolate", type=int, default=8, help="to this grid x grid")
     p.add_argument("--controllers", type=int, default=4, help="to this many controllers")
     args = p.parse_args()
-    _, (arm,), overrides = export_cells(SHIPPED, None, ["mbc"], "a1_arm/reaching")
+    _, (arm,), overrides = export_cells(SHIPPED, None, ["mbc"], DEFAULT_TASK)
     ua, gm = (
         a.ravel()
         for a in np.meshgrid(
@@ -69,7 +70,7 @@ def main() -> None:
     print(f"{cells} cells x {e} episodes x {args.steps} steps, MBC, device {jax.devices()[0]}\n")
     print("| how | compile (s) | run (s) | total (s) |\n|---|---|---|---|")
 
-    base = make("a1_arm/reaching", arm=arm, controller="mbc", **overrides)
+    base = make(DEFAULT_TASK, arm=arm, controller="mbc", **overrides)
     mx, in_axes = batch_arm_params(
         base.mx, base.model, upper_arm_length=np.repeat(ua, e), gripper_mass=np.repeat(gm, e)
     )
@@ -80,7 +81,7 @@ def main() -> None:
         spec = dataclasses.replace(
             ArmSpec(), upper_arm_length=float(length), gripper_mass=float(mass)
         )
-        env = make("a1_arm/reaching", arm=spec, controller="mbc", **overrides)
+        env = make(DEFAULT_TASK, arm=spec, controller="mbc", **overrides)
         one.append(timed(env, e, args.steps))
         c, r = one[-1]
         print(

@@ -19,21 +19,21 @@ import argparse
 
 import numpy as np
 
-from dpc_mjx import adapter, io
+from dpc_mjx import adapter, io, stats
 from dpc_mjx.adapter.networks import encode
-from dpc_mjx.envs.registry import make
-from dpc_mjx.run.pipeline import SHIPPED, env_overrides
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
+from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.plots import latent_by_arm
 
-TASK = "a1_arm/reaching"
+TASK = DEFAULT_TASK
 
 
 def linear_fit(z: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least squares y ~ z w + b: the direction w (2,) and the R^2."""
+    """Least squares y ~ z w + b: the direction w (2,) and the R^2 (the explained variance: with
+    an intercept, R^2 up to float rounding)."""
     a = np.concatenate([z, np.ones((len(z), 1))], 1)
     coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-    resid = y - a @ coef
-    return coef[:2], 1.0 - resid.var() / y.var()
+    return coef[:2], stats.explained_variance(y, a @ coef)
 
 
 def angle(u: np.ndarray, v: np.ndarray) -> float:

@@ -25,7 +25,7 @@ import numpy as np
 from dpc_mjx import io
 from dpc_mjx.envs.registry import make
 from dpc_mjx.envs.rollout import record_episodes, zero_policy
-from dpc_mjx.run.pipeline import SHIPPED, env_overrides
+from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.plots import lifting_trajectory
 
 TASK = "a1_arm/lifting"
@@ -57,7 +57,7 @@ def main() -> None:
     runs = {}
     for label, controller, policy in (
         ("MBC", "mbc", zero_policy),
-        ("DPC", "policy", art.dpc_policy("regular")),
+        ("DPC", "dpc", art.dpc_policy("regular")),
     ):
         env = make(TASK, arm="regular", controller=controller, **overrides)
         r = record_episodes(env, args.episodes, args.steps, args.seed, record, policy)

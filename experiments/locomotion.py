@@ -11,10 +11,10 @@ from __future__ import annotations
 import argparse
 import pathlib
 import sys
-import time
 
 import dpc_mjx  # noqa: F401
 from dpc_mjx.control.closed_loop import run_locomotion
+from dpc_mjx.timing import Stopwatch
 
 CONDITIONS = [  # (gait, command: forward m/s, lateral m/s, yaw rate rad/s)
     ("stand", (0.0, 0.0, 0.0)),
@@ -39,7 +39,7 @@ def main() -> None:
         "| yaw-rate RMSE (rad/s) | roll RMS (rad) | pitch RMS (rad) | env-steps/s |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    t0 = time.time()
+    clock = Stopwatch()
     for variant in a.variants:
         for kind in a.controllers:
             for gait_name in ("stand", "trot"):
@@ -55,7 +55,7 @@ def main() -> None:
                     print(line, flush=True)
                     lines.append(line)
     table = "\n".join(lines)
-    print(f"\n{table}\n\n({time.time() - t0:.0f} s, command: {' '.join(sys.argv)})")
+    print(f"\n{table}\n\n({clock.elapsed():.0f} s, command: {' '.join(sys.argv)})")
     if a.out:
         a.out.write_text(table + "\n")
 

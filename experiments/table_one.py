@@ -25,13 +25,12 @@ controller, DPC - MBC paired on the same episodes, and the task's measures.
 from __future__ import annotations
 
 import argparse
-import csv
 import pathlib
 
-import numpy as np
-
-from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
-from dpc_mjx.run.stats import mean_ci, paired_diff_ci
+from dpc_mjx.controllers import Controller
+from dpc_mjx.io.shipped import SHIPPED
+from dpc_mjx.run.pipeline import evaluate_export
+from dpc_mjx.run.report import ci_text, paired_text, read_cells
 
 CELLS = (  # (task, arm, the paper's row, the task's main measure: a CSV column)
     ("reaching", "regular", "regular", "ee_rmse"),
@@ -40,7 +39,7 @@ CELLS = (  # (task, arm, the paper's row, the task's main measure: a CSV column)
     ("carrying", "double", "double", "ball_on_target"),
     ("pushing", "pusher", "heavier", "box_dx"),
 )
-CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
+CONTROLLERS = tuple(Controller)  # mbc, observer, dpc, oracle: the table's columns
 HEADER = (
     "| task / arm | paper's row | MBC: fall rate, return [95% CI] | observer | DPC "
     "| oracle (privileged) | DPC - MBC return, paired [95% CI] "
@@ -53,34 +52,6 @@ MEASURE_HEADER = (
 )
 
 
-def read_cell(path: pathlib.Path) -> dict[str, dict[str, np.ndarray]]:
-    """{controller: {column: (episodes,) array}} from a cell's per-episode CSV, episodes in
-    order (the same episodes under every controller)."""
-    by: dict[str, list[dict]] = {}
-    with path.open(newline="") as f:
-        for row in csv.DictReader(f):
-            by.setdefault(row["controller"], []).append(row)
-    out = {}
-    for controller, rows in by.items():
-        rows.sort(key=lambda r: int(r["episode"]))
-        out[controller] = {
-            k: np.array([float(r[k]) for r in rows])
-            for k in rows[0]
-            if k not in ("arm", "controller", "fall_step")
-        }
-    return out
-
-
-def _ci(values: np.ndarray, fmt: str = ".3f") -> str:
-    m, lo, hi = mean_ci(values)
-    return f"{m:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
-
-
-def _paired(a: np.ndarray, b: np.ndarray, fmt: str = "+.3f") -> str:
-    d, lo, hi = paired_diff_ci(a, b)
-    return f"{d:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
-
-
 def summarize(out: pathlib.Path) -> str:
     """The two summary tables from the cells' CSVs in `out`."""
     rows, measures = [], []
@@ -88,20 +59,20 @@ def summarize(out: pathlib.Path) -> str:
         path = out / f"{task}-{arm}.csv"
         if not path.exists():
             continue
-        c = read_cell(path)
+        c = read_cells(path)
         figures = " | ".join(
-            f"{c[k]['fell'].mean():.2f}, {_ci(c[k]['return'], '.1f')}" for k in CONTROLLERS
+            f"{c[k]['fell'].mean():.2f}, {ci_text(c[k]['return'], '.1f')}" for k in CONTROLLERS
         )
         dpc, mbc = c["dpc"], c["mbc"]
         rows.append(
             f"| {task} / {arm} | {paper} | {figures} | "
-            f"{_paired(dpc['return'], mbc['return'], '+.1f')} | "
-            f"{_paired(dpc['fell'], mbc['fell'])} |"
+            f"{paired_text(dpc['return'], mbc['return'], '+.1f')} | "
+            f"{paired_text(dpc['fell'], mbc['fell'])} |"
         )
-        per = " | ".join(_ci(c[k][measure]) for k in CONTROLLERS)
+        per = " | ".join(ci_text(c[k][measure]) for k in CONTROLLERS)
         measures.append(
-            f"| {task} / {arm} | {measure} | {per} | {_paired(dpc[measure], mbc[measure])} | "
-            f"{_paired(c['oracle'][measure], mbc[measure])} |"
+            f"| {task} / {arm} | {measure} | {per} | {paired_text(dpc[measure], mbc[measure])} | "
+            f"{paired_text(c['oracle'][measure], mbc[measure])} |"
         )
     return "\n".join([HEADER, *rows, "", MEASURE_HEADER, *measures])
 

@@ -26,13 +26,13 @@ import dataclasses
 import pathlib
 
 from dpc_mjx import adapter, io
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
+from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate, table_row
-from dpc_mjx.run.pipeline import SHIPPED, env_overrides
-from dpc_mjx.run.stats import mcnemar_counts, mcnemar_p, paired_diff_ci
+from dpc_mjx.run.report import versus_baseline
 from dpc_mjx.sac import dpc_policy
 
-TASK = "a1_arm/reaching"
+TASK = DEFAULT_TASK
 HEADER = (
     "| arm | controller | falls | fall rate [95% CI] | mean return [95% CI] | return - MBC, "
     "paired [95% CI] | McNemar p vs MBC | share of the full policy's gain |\n"
@@ -101,13 +101,7 @@ def main() -> None:
     full_return = cells[-1].mean_return if args.full else None
     lines = [HEADER]
     for c in cells:
-        diff, lo, hi = paired_diff_ci(c.per_episode["return"], mbc.per_episode["return"])
-        only_c, only_mbc = mcnemar_counts(c.per_episode["fell"], mbc.per_episode["fell"])
-        share = ""
-        if full_return is not None and c is not mbc and full_return != mbc.mean_return:
-            share = f"{(c.mean_return - mbc.mean_return) / (full_return - mbc.mean_return):.0%}"
-        paired = "" if c is mbc else f"{diff:+.1f} [{lo:+.1f}, {hi:+.1f}]"
-        p = "" if c is mbc else f"{mcnemar_p(only_c, only_mbc):.2g} ({only_c} vs {only_mbc})"
+        paired, p, share = versus_baseline(c, mbc, full_return)
         lines.append(
             f"| {args.arm} | {c.controller} | {c.falls} | {c.fall_rate:.2f} "
             f"[{c.fall_ci[0]:.2f}, {c.fall_ci[1]:.2f}] | {c.mean_return:.1f} "

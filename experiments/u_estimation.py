@@ -29,14 +29,15 @@ import argparse
 import pathlib
 
 import jax
+import matplotlib.pyplot as plt
 import numpy as np
 
-from dpc_mjx import io
+from dpc_mjx import io, stats
 from dpc_mjx.envs import rollout
-from dpc_mjx.envs.observations import PRIVILEGED
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.observations import PRIVILEGED, U_OBS_SIZE
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
+from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
-from dpc_mjx.run.pipeline import SHIPPED, env_overrides
 
 COMPONENTS = ("f_x", "f_y", "f_z", "tau_x", "tau_y", "tau_z")
 PUSH_ONSET = 5.0  # N: an end-effector force above this starts a push
@@ -45,7 +46,7 @@ PUSH_ONSET = 5.0  # N: an end-effector force above this starts a push
 def rollouts(export: pathlib.Path, episodes: int, steps: int, seed: int) -> dict:
     """Per-step records (steps, episodes, ...) of the export's DPC on the reaching task."""
     artefacts = io.load(export)
-    env = make("a1_arm/reaching", arm="regular", controller="policy", **env_overrides(artefacts))
+    env = make(DEFAULT_TASK, arm="regular", controller="dpc", **env_overrides(artefacts))
     policy = artefacts.dpc_policy("regular")
 
     def record(before, after):
@@ -77,24 +78,13 @@ def estimates(rec: dict, export: pathlib.Path) -> np.ndarray:
     policy = artefacts.dpc_policy("regular")
     frame = env_overrides(artefacts)["u_frame"]
     u = np.asarray(jax.jit(policy)(rec["obs"], None)) * np.asarray(
-        make("a1_arm/reaching", arm="regular", **env_overrides(artefacts)).config.u_scale
+        make(DEFAULT_TASK, arm="regular", **env_overrides(artefacts)).config.u_scale
     )
     return u if frame == "yaw" else np.asarray(wrench_to_yaw_frame(u, rec["yaw"]))
 
 
-def scores(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R^2, RMSE) per component over the rows of (N, 6) arrays."""
-    resid = ((pred - truth) ** 2).sum(0)
-    spread = ((truth - truth.mean(0)) ** 2).sum(0)
-    return 1.0 - resid / spread, np.sqrt(resid / len(truth))
-
-
 def figure(rec: dict, series: dict[str, np.ndarray], truth: np.ndarray, path: pathlib.Path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt.switch_backend("Agg")  # PNG files, no screen needed
     force = np.linalg.norm(rec["push"], axis=-1)  # (T, B) N
     quiet = round(1.0 / 0.02)
     chosen = None
@@ -140,8 +130,8 @@ def main() -> None:
     args = ap.parse_args()
     rec = rollouts(pathlib.Path(args.export), args.episodes, args.steps, args.seed)
     truth = np.asarray(wrench_to_yaw_frame(rec["u_oracle"], rec["yaw"]))
-    n_obs = 6
-    series = {"observer": rec["obs"][..., -n_obs:], "dpc": estimates(rec, args.export)}
+    u_obs = rec["obs"][..., -U_OBS_SIZE:]  # the observation's last entries
+    series = {"observer": u_obs, "dpc": estimates(rec, args.export)}
     rows = {}
     if args.other:
         series[args.other_label] = estimates(rec, args.other)
@@ -158,7 +148,7 @@ def main() -> None:
     )
     print("|---|" + "---|" * 8)
     for name, (u, true) in rows.items():
-        r2, rmse = scores(u, true)
+        r2, rmse = stats.r2(true, u), stats.rmse(true, u)  # per component
         cells = " | ".join(f"{v:.2f}" for v in r2)
         f_rmse = np.sqrt((rmse[:3] ** 2).mean())
         t_rmse = np.sqrt((rmse[3:] ** 2).mean())

@@ -10,6 +10,7 @@ import pytest
 import dpc_mjx
 from dpc_mjx import DpcError, adapter
 from dpc_mjx.adapter import AdapterConfig, Dataset
+from dpc_mjx.envs import DEFAULT_TASK
 
 _SAMPLES = 4096
 _ENVS = 16
@@ -20,7 +21,7 @@ _MIN_GAIN = 0.2  # nats per sample the adapter must beat the constant predictor 
 
 @pytest.fixture(scope="module")
 def env():
-    return dpc_mjx.make("a1_arm/reaching", arm="regular", controller="mbc")
+    return dpc_mjx.make(DEFAULT_TASK, arm="regular", controller="mbc")
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +111,7 @@ def test_dagger_data_are_the_students_states_labelled_by_the_oracle(data):
     """`collect` with a policy on a 'policy' env (DAgger): the episodes start as MBC's, then the
     student's u (here a constant 30 N down) moves the robot to other states, and each row keeps
     the oracle's u measured in the state the student visited."""
-    env = dpc_mjx.make("a1_arm/reaching", arm="regular", controller="policy")
+    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", controller="dpc")
     n = _ENVS * 8
 
     def student(obs, key):

@@ -25,9 +25,12 @@ import numpy as np
 import pytest
 from brax.envs.base import Env, State
 from helpers import recorded_compiles
+from test_sac import _CONFIG, reaching_latent_env
 
-from dpc_mjx import DpcError, devices
-from dpc_mjx.envs import rollout
+from dpc_mjx import DpcError, adapter, devices
+from dpc_mjx.envs import DEFAULT_TASK, rollout
+from dpc_mjx.envs.registry import make
+from dpc_mjx.sac import SacConfig, make_trainer, train
 
 HERE = pathlib.Path(__file__).resolve()
 ROOT = HERE.parents[1]
@@ -117,11 +120,8 @@ def _toy(episodes: int = EPISODES, steps: int = STEPS, seed: int = SEED) -> dict
 
 def _reaching() -> dict:
     """20 steps of 4 reaching episodes (MBC), and 90 random-motion samples from 3 envs."""
-    from dpc_mjx import adapter
-    from dpc_mjx.envs.registry import make
-
-    out = rollout.run_episodes(make("a1_arm/reaching", arm="regular"), 4, 20, seed=3, chunk=10)
-    env = make("a1_arm/reaching", arm="regular", controller="mbc")
+    out = rollout.run_episodes(make(DEFAULT_TASK, arm="regular"), 4, 20, seed=3, chunk=10)
+    env = make(DEFAULT_TASK, arm="regular", controller="mbc")
     data = adapter.collect(env, 90, n_envs=3, seed=5, chunk=10, progress=False)
     names = ("s_body", "s_arm", "s_drp_next", "env_id", "u_oracle")
     return out | {f"data_{k}": getattr(data, k) for k in names}
@@ -144,13 +144,9 @@ SAC_TOY = dict(  # 4 epochs of 64 actor steps x 8 envs: the toy task is learned 
 def _sac(kind: str) -> dict:
     """A short SAC run: its evaluations (epoch 0: the starting actor) and the devices its env
     batch lives on after an epoch."""
-    from dpc_mjx.sac import SacConfig, make_trainer, train
-
     if kind == "sac-toy":
         env, config = ToyEnv(), SacConfig(**SAC_TOY)
     else:  # tests/test_sac.py's env and config (3 epochs of 32 actor steps x 8 envs)
-        from test_sac import _CONFIG, reaching_latent_env
-
         env, config = reaching_latent_env()[1], _CONFIG
     trainer = make_trainer(env, config)
     carry = trainer.init(jax.random.PRNGKey(config.seed))
@@ -322,8 +318,6 @@ def test_padding_and_its_error():
 
 
 def test_batches_that_padding_would_change_must_divide_the_devices(monkeypatch):
-    from dpc_mjx.sac import SacConfig, make_trainer
-
     monkeypatch.setattr(devices, "mesh", lambda local=False: _FakeMesh(2))
 
     class ModelGrid:  # a batch of models (`ModelBatchEnv`): one model per env

@@ -1,5 +1,7 @@
 """The DPC environments: brax API, observation layout, reward, NaN isolation, errors (batch 2)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jp
 import mujoco
@@ -9,12 +11,14 @@ from helpers import FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
-from dpc_mjx.envs import base, observations, registry, wrap_for_training
+from dpc_mjx.envs import DEFAULT_TASK, base, observations, registry, wrap_for_training
+from dpc_mjx.envs import config as env_config
 from dpc_mjx.envs.disturbances import DisturbanceSampler, make_sampler
+from dpc_mjx.robots.layout import layout
 from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world, wrench_to_yaw_frame
 
 _BATCH = 2
-_TASK = "a1_arm/reaching"
+_TASK = DEFAULT_TASK
 _REWARD_TOL = 1e-5
 _U_OBS_ATOL = 1e-4  # N, N·m: u_obs against the observer's estimate turned here (float32)
 _OBS_SIZES = {  # arm -> (s_arm, p_arm) sizes: 5 joints (4 hinges + finger) per WidowX-like arm
@@ -164,8 +168,6 @@ def test_fall_ends_the_episode_with_the_penalty(regular):
 def test_disturbance_schedule_follows_its_config():
     """Sampling alone (no physics): targets within bounds, pushes piecewise constant."""
     model = dpc_mjx.robots.build("regular")
-    from dpc_mjx.robots.layout import layout
-
     cfg = registry.get_config(_TASK, push_force=(10.0, 10.0), payload_mass=(0.2, 0.2))
     sampler: DisturbanceSampler = make_sampler(cfg, model, layout(model))
     d = sampler.init(jax.random.PRNGKey(3))
@@ -190,8 +192,6 @@ def test_disturbance_schedule_follows_its_config():
 def test_sagittal_pushes_turn_with_the_heading():
     """push_axis_weights (1, 0, 1): no lateral push in the yaw frame, whatever the heading."""
     model = dpc_mjx.robots.build("regular")
-    from dpc_mjx.robots.layout import layout
-
     cfg = registry.get_config(_TASK, push_force=(10.0, 10.0), push_axis_weights=(1.0, 0.0, 1.0))
     sampler = make_sampler(cfg, model, layout(model))
     d = sampler.init(jax.random.PRNGKey(5))
@@ -208,18 +208,40 @@ def test_action_scale_per_axis():
     assert config.u_scale == (10.0, 20.0, 30.0, 5.0, 5.0, 5.0)
 
 
+def test_config_parts_read_and_replace_by_the_same_flat_names():
+    """`EnvConfig`'s parts (sensors, disturbances, motion) hold its fields under their flat
+    names, which stay what `make`, `--env` and the export sidecar use."""
+    config = registry.get_config(_TASK)
+    parts = [f.name for part in env_config.PARTS.values() for f in dataclasses.fields(part)]
+    flat = [f.name for f in dataclasses.fields(config)]
+    assert len(parts) == len(set(parts)) and set(parts) <= set(flat)  # each field in one part
+    assert config.sensors == env_config.SensorConfig(sensor_noise=1.0, sensor_delay=1)
+    assert config.disturbances.push_force == config.push_force == (0.0, 60.0)  # reaching's
+    assert config.motion.command_vx == config.command_vx
+    exact = env_config.SensorConfig(0.0, 0)
+    assert config.replace(sensors=exact) == config.replace(sensor_noise=0.0, sensor_delay=0)
+    assert registry.get_config(_TASK, sensors={"sensor_delay": 2}).sensor_delay == 2
+    assert list(dataclasses.asdict(config)) == flat  # the sidecar's env_config: flat, as before
+    with pytest.raises(DpcError, match=r"\['sensor_delay'\] given both alone and in sensors"):
+        config.replace(sensors={"sensor_delay": 2}, sensor_delay=3)
+    with pytest.raises(DpcError, match="sensors takes a SensorConfig or a dict of some of"):
+        config.replace(sensors={"push_force": (0.0, 1.0)})
+    with pytest.raises(DpcError, match="sensor_noise must be a finite number"):
+        config.replace(sensors={"sensor_noise": -1.0})  # validated as the flat field is
+
+
 def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
     def no_build(*_):
         pytest.fail("the model was built before the arguments were checked")
 
     monkeypatch.setattr(base, "build", no_build)
     with recorded_compiles() as compiles:
-        with pytest.raises(DpcError, match="known tasks.*a1_arm/reaching"):
+        with pytest.raises(DpcError, match=f"known tasks.*{DEFAULT_TASK}"):
             dpc_mjx.make("a1_arm/juggling")
         with pytest.raises(DpcError, match="known variants"):
             dpc_mjx.make(_TASK, arm="regularr")
-        with pytest.raises(DpcError, match="controller.*'mbc'"):
-            dpc_mjx.make(_TASK, controller="dpc")
+        with pytest.raises(DpcError, match="controller 'pid'.*'mbc'"):
+            dpc_mjx.make(_TASK, controller="pid")
         with pytest.raises(DpcError, match="low <= high"):
             dpc_mjx.make(_TASK, push_force=(40.0, 0.0))
         with pytest.raises(DpcError, match="known options"):

@@ -22,6 +22,7 @@ from brax.training.types import Transition
 from flax import struct
 
 import dpc_mjx.io as dio
+from dpc_mjx import serialization as ser
 from dpc_mjx.adapter.networks import (
     AdapterConfig,
     DecoderState,
@@ -34,21 +35,21 @@ from dpc_mjx.adapter.networks import (
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.observations import S_BODY_NAMES, U_OBS_NAMES
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import serialization as ser
+from dpc_mjx.io import inference
 from dpc_mjx.io.inference import NumpyPolicy
-from dpc_mjx.robots import spec_json
-from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
-from dpc_mjx.robots.variants import VARIANTS
-from dpc_mjx.rotations import wrench_to_world
-from dpc_mjx.sac import checkpoint
-from dpc_mjx.sac.networks import make_networks
-from dpc_mjx.sac.policy import (
+from dpc_mjx.policy.policy import (
     POLICY_INPUTS,
     PolicyState,
     act,
     dpc_policy,
     observation_size,
 )
+from dpc_mjx.robots import spec_json
+from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
+from dpc_mjx.robots.variants import VARIANTS
+from dpc_mjx.rotations import wrench_to_world
+from dpc_mjx.sac import checkpoint
+from dpc_mjx.sac.networks import make_networks
 from dpc_mjx.sac.train import BestPolicy, Carry, SacConfig, TrainingState
 
 SHIPPED = pathlib.Path(dio.__file__).parent.parent / "artefacts" / "regular"
@@ -420,10 +421,8 @@ def test_numpy_policy_rejects_bad_input(exported, export_copy):
 
 def test_inference_imports_no_jax(exported):
     """inference.py alone, in a Python where jax and flax cannot be imported, runs an export."""
-    import dpc_mjx.io.inference
-
-    assert dpc_mjx.io.inference.FORMAT_VERSION == dio.FORMAT_VERSION
-    assert dpc_mjx.io.inference.SIDECAR == dio.SIDECAR
+    assert inference.FORMAT_VERSION == dio.FORMAT_VERSION
+    assert inference.SIDECAR == dio.SIDECAR
     script = f"""
 import importlib.abc, importlib.util, sys
 class NoJax(importlib.abc.MetaPathFinder):
@@ -432,7 +431,7 @@ class NoJax(importlib.abc.MetaPathFinder):
             raise ImportError(f"inference.py imported {{name}}")
 sys.meta_path.insert(0, NoJax())
 import numpy as np
-spec = importlib.util.spec_from_file_location("dpc_inference", {dpc_mjx.io.inference.__file__!r})
+spec = importlib.util.spec_from_file_location("dpc_inference", {inference.__file__!r})
 mod = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(mod)
 for folder in ({str(exported)!r}, {str(SHIPPED)!r}):

@@ -20,6 +20,7 @@ from dpc_mjx.control import balance, gait, observer
 from dpc_mjx.control.closed_loop import init_loop, make_chunk
 from dpc_mjx.control.controller import make_controller
 from dpc_mjx.control.state import BodyState, read_state
+from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.robots import build
 from dpc_mjx.robots.a1 import FOOT_RADIUS
 from dpc_mjx.robots.standing import perturbed_home
@@ -203,7 +204,7 @@ def test_env_observer_follows_the_oracles_vertical_force():
     """Standing, no pushes, exact sensors: the estimate's f_z is the oracle's (the arm's mount
     force) plus the legs' term, to _ENV_FZ_TOL; the env steps finitely and ignores the action."""
     env = dpc_mjx.make(
-        "a1_arm/reaching",
+        DEFAULT_TASK,
         arm="regular",
         controller="observer",
         gait="stand",

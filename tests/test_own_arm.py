@@ -13,6 +13,9 @@ import pytest
 from helpers import fast_jit
 
 from dpc_mjx import DpcError, io
+from dpc_mjx.control.static_balance import static_balance
+from dpc_mjx.envs.registry import make, resolve_arm
+from dpc_mjx.io.shipped import export_cells
 from dpc_mjx.robots import (
     Mount,
     UrdfArm,
@@ -21,10 +24,10 @@ from dpc_mjx.robots import (
     build,
     layout,
     resolve,
-    static_balance,
 )
 from dpc_mjx.robots.arm_file import read
 from dpc_mjx.run import cli
+from dpc_mjx.run.eval import evaluate
 from dpc_mjx.run.pipeline import SHIPPED, evaluate_export, transfer_arm
 
 _MASS_TOL = 1e-9  # kg: masses are copied, not recomputed
@@ -179,8 +182,18 @@ def test_z1_passes_the_static_balance_check_and_a_heavy_arm_does_not(tmp_path):
         links={"link3": heavy},
         joints={"j3": _joint("j3", "revolute", "link2", "link3", 0.6)},
     )
+    heavy_arm = UrdfArm(str(path))
+    assert resolve(heavy_arm).arms == (heavy_arm,)  # a pure lookup: no compile, no balance check
     with pytest.raises(DpcError, match="cannot hold this arm up .* lighter or shorter arm"):
-        resolve(UrdfArm(str(path)))
+        resolve_arm(heavy_arm)
+    # and where an arm comes in, before any compile: make (transfer's first step), eval, sweep's
+    # and eval's export cells
+    with pytest.raises(DpcError, match="cannot hold this arm up"):
+        make("a1_arm/reaching", arm=heavy_arm)
+    with pytest.raises(DpcError, match="cannot hold this arm up"):
+        evaluate(["regular", heavy_arm], ["mbc"])
+    with pytest.raises(DpcError, match="cannot hold this arm up"):
+        export_cells(SHIPPED, [str(path)], ["mbc"], "a1_arm/reaching")
 
 
 _BAD_URDFS = {  # what is changed -> the error's words

@@ -16,6 +16,7 @@ from mujoco import mjx
 
 import dpc_mjx
 from dpc_mjx import sim
+from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import OUTPUTS, NativePhysics, make_physics
 from dpc_mjx.robots import build
@@ -143,7 +144,7 @@ def test_sim2sim_runs_both_engines_on_the_same_episodes(monkeypatch, tmp_path, c
 
 def test_engine_errors(model):
     with pytest.raises(DpcError, match="engine='bullet' is not valid"):
-        dpc_mjx.make("a1_arm/reaching", engine="bullet")
+        dpc_mjx.make(DEFAULT_TASK, engine="bullet")
     with pytest.raises(DpcError, match="engine='bullet' is not valid"):
         make_physics("bullet", model, None)
     spec = mujoco.MjSpec()

@@ -6,8 +6,9 @@ import json
 import pytest
 
 from dpc_mjx import DpcError, io
+from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.io.serialization import jsonable
-from dpc_mjx.run import cli
+from dpc_mjx.run import cli, pipeline
 from dpc_mjx.run.config import RunConfig, read_run_config, recipe, start_run, tuples
 from dpc_mjx.run.pipeline import SHIPPED, SHIPPED_PAPER
 from dpc_mjx.sac import SacConfig
@@ -99,7 +100,7 @@ def test_shipped_artefacts_load_and_are_the_default_recipe():
     # its own arm first, then the encoders transferred to it (`dpc-mjx transfer --samples 10000`)
     assert list(art.meta["encoders"]) == ["regular", *TRANSFERRED]
     assert all(art.arm_spec(arm) == arm for arm in art.encoders)
-    assert art.meta["extra"]["task"] == "a1_arm/reaching"
+    assert art.meta["extra"]["task"] == DEFAULT_TASK == RunConfig().task
     defaults = RunConfig()
     # read with today's SacConfig (options added since default to what the export did)
     assert SacConfig(**tuples(art.meta["sac_config"])) == defaults.sac
@@ -125,3 +126,45 @@ def test_shipped_paper_export_is_the_paper_recipe_and_its_actor_sees_no_privileg
     layout = art.meta["policy"]["observation_layout"]
     assert len(layout) == art.policy.obs_norm.mean.shape[-1] == 11 + art.adapter_config.latent_size
     assert not any("oracle" in name or "push" in name or "payload" in name for name in layout)
+
+
+def test_a_run_has_one_seed_that_the_adapter_and_sac_follow(tmp_path):
+    """`seed` is the run's; `adapter.seed` and `sac.seed` always equal it (the default run's
+    seeds are those of the shipped export, all 0) and are not options of their own."""
+    assert (RunConfig().seed, RunConfig().adapter.seed, RunConfig().sac.seed) == (0, 0, 0)
+    config = RunConfig().replace(seed=5)
+    assert config.adapter.seed == config.sac.seed == 5
+    assert dataclasses.replace(config, seed=7).sac.seed == 7
+    for key in ("sac.seed", "adapter.seed"):
+        with pytest.raises(DpcError, match=f"{key} is the run's seed.*set `seed`"):
+            RunConfig().replace(**{key: 5})
+    args = ["train", "--run", str(tmp_path / "r"), "--set", "sac.seed=5"]
+    with pytest.raises(DpcError, match="--set seed=5"):
+        cli._run_config(cli._parser().parse_args(args))
+    # a config file of an earlier version, whose sub-seeds were overwritten by the run's: read
+    # as the run it was, and resumable under the same options
+    old = RunConfig().to_json() | {"seed": 3, "eval_steps": 1000}
+    old["sac"] = old["sac"] | {"seed": 0}
+    old["adapter"] = old["adapter"] | {"seed": 9}
+    (tmp_path / "config.json").write_text(json.dumps(old))
+    read = read_run_config(tmp_path)
+    assert (read.seed, read.adapter.seed, read.sac.seed, read.eval_steps) == (3, 3, 3, 1000)
+    start_run(RunConfig().replace(seed=3), tmp_path, resume=True)  # eval_steps 1000 = reaching's
+    with pytest.raises(DpcError, match="another configuration"):
+        start_run(RunConfig().replace(seed=4), tmp_path, resume=True)
+
+
+def test_eval_steps_follow_the_task_unless_set(tmp_path, monkeypatch):
+    """`train`'s evaluation runs episodes of the task's length, as `dpc-mjx eval` does."""
+    assert RunConfig().eval_steps is None and RunConfig().episode_steps == 1000  # reaching
+    pushing = RunConfig().replace(task="a1_arm/pushing", arm="pusher")
+    assert pushing.episode_steps == 500
+    assert pushing.replace(eval_steps=200).episode_steps == 200
+    assert RunConfig().replace(**{"env.episode_length": 300}).episode_steps == 300
+    with pytest.raises(DpcError, match="eval_steps must be an int >= 1"):
+        RunConfig().replace(eval_steps=0)
+    steps = []
+    monkeypatch.setattr(pipeline, "evaluate", lambda *a, **kw: steps.append(kw["steps"]) or [])
+    pipeline.evaluate_run(pushing, tmp_path, SHIPPED)
+    pipeline.evaluate_export(SHIPPED, task=pushing.task, csv=tmp_path / "e.csv")
+    assert steps == [None, None]  # both: `eval.evaluate`'s default, the task's episode length

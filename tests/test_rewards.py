@@ -3,9 +3,14 @@
 import math
 
 import jax.numpy as jp
+import mujoco
+import numpy as np
 import pytest
 
+from dpc_mjx.envs import observations as obs
 from dpc_mjx.envs import rewards
+from dpc_mjx.robots import build
+from dpc_mjx.robots.layout import layout
 
 _TOL = 1e-6
 
@@ -40,13 +45,6 @@ def test_batched_input_reduces_the_last_axis():
 
 
 def test_observation_blocks_on_a_hand_made_state():
-    import mujoco
-    import numpy as np
-
-    from dpc_mjx.envs import observations as obs
-    from dpc_mjx.robots import build
-    from dpc_mjx.robots.layout import layout
-
     model = build("regular")
     lay = layout(model)
     d = mujoco.MjData(model)

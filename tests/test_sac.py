@@ -16,6 +16,7 @@ import dpc_mjx
 from dpc_mjx import DpcError
 from dpc_mjx.adapter import AdapterConfig, Dataset, EncoderState, Normalizer, encode
 from dpc_mjx.adapter.networks import encoder_module
+from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.envs.observations import PRIVILEGED, PRIVILEGED_SIZE
 from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world, wrench_to_yaw_frame
 from dpc_mjx.sac import (
@@ -56,7 +57,7 @@ class _Killed(Exception):
 def reaching_latent_env():
     """The reaching env (regular arm, 100-step episodes: short evaluations) and the same env seen
     through an untrained encoder, `[s_body, z]` (tests/test_devices.py runs it sharded)."""
-    env = dpc_mjx.make("a1_arm/reaching", arm="regular", episode_length=100)
+    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", episode_length=100)
     config = AdapterConfig()
     n_in = env.obs_layout.encoder_size  # [s_body, s_arm, p_arm]
     params = encoder_module(config).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))

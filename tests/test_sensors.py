@@ -4,6 +4,7 @@ observation carries them."""
 
 import jax
 import jax.numpy as jp
+import mujoco
 import numpy as np
 import pytest
 from helpers import FAST_COMPILE
@@ -11,7 +12,7 @@ from helpers import FAST_COMPILE
 import dpc_mjx
 from dpc_mjx.control import sensors
 from dpc_mjx.control.state import BodyState
-from dpc_mjx.envs import observations
+from dpc_mjx.envs import DEFAULT_TASK, observations
 from dpc_mjx.rotations import roll_pitch_yaw
 
 _TICKS = 20_000  # draws for the noise statistics
@@ -90,8 +91,6 @@ def test_measured_state_carries_each_error_as_documented():
 
 
 def _quat(rot: np.ndarray) -> np.ndarray:
-    import mujoco
-
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, rot.reshape(-1))
     return q
@@ -102,7 +101,7 @@ def resets():
     """A batch reset with the robot's sensors and one with exact sensors (same episodes)."""
     out = {}
     for noise in (1.0, 0.0):
-        env = dpc_mjx.make("a1_arm/reaching", arm="regular", sensor_noise=noise)
+        env = dpc_mjx.make(DEFAULT_TASK, arm="regular", sensor_noise=noise)
         reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)  # called once
         out[noise] = env, reset(jax.random.split(jax.random.PRNGKey(3), 16))
     return out
@@ -129,16 +128,16 @@ def test_observation_is_measured_and_exact_sensors_observe_the_truth(resets):
 
 def test_sensor_options_are_checked():
     with pytest.raises(dpc_mjx.DpcError, match=r"sensor_delay must be an int in \[0, 10\]"):
-        dpc_mjx.make("a1_arm/reaching", arm="regular", sensor_delay=-1)
+        dpc_mjx.make(DEFAULT_TASK, arm="regular", sensor_delay=-1)
     with pytest.raises(dpc_mjx.DpcError, match="sensor_noise must be a finite number"):
-        dpc_mjx.make("a1_arm/reaching", arm="regular", sensor_noise=float("nan"))
+        dpc_mjx.make(DEFAULT_TASK, arm="regular", sensor_noise=float("nan"))
 
 
 @pytest.mark.slow  # an env step's compile (~1 min on 2 cores); `make test-all`
 def test_torques_act_one_tick_after_their_measurement():
     """sensor_delay=1: after a step, the ctrl computed at the last tick is still queued, and the
     physics ran on the one computed a tick before (they differ while the robot trots)."""
-    env = dpc_mjx.make("a1_arm/reaching", arm="regular", sensor_noise=0.0, controller="mbc")
+    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", sensor_noise=0.0, controller="mbc")
     state = jax.jit(env.reset)(jax.random.PRNGKey(0))
     assert state.info["ctrl_queue"].shape == (1, env.model.nu)
     state = jax.jit(env.step)(state, jp.zeros(6))

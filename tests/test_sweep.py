@@ -12,8 +12,8 @@ from dpc_mjx.envs.rollout import run_episodes
 from dpc_mjx.errors import DpcError
 from dpc_mjx.run import cli
 from dpc_mjx.run.pipeline import SHIPPED, export_cells
-from dpc_mjx.run.stats import paired_diff_ci
 from dpc_mjx.run.sweep import grid_values, sweep
+from dpc_mjx.stats import paired_diff_ci
 
 # 2 x 2 arms: the shipped export's `regular` (0.14 m, 0.1 kg), `longer` (0.28 m), `heavier`
 # (0.5 kg) and both changed at once

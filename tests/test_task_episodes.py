@@ -21,7 +21,7 @@ from helpers import FAST_COMPILE
 from mujoco import mjx
 
 import dpc_mjx
-from dpc_mjx.envs import base, rollout
+from dpc_mjx.envs import DEFAULT_TASK, base, rollout
 from dpc_mjx.envs.disturbances import GRAVITY, integrate_command
 
 _EPISODES = 4
@@ -82,7 +82,7 @@ def test_the_desired_path_is_the_command_integrated():
 
 @pytest.mark.parametrize("arm", ["regular", "double"])
 def test_the_end_effector_error_is_the_forward_kinematics_to_first_order(arm):
-    env = dpc_mjx.make("a1_arm/reaching", arm=arm, engine="native")
+    env = dpc_mjx.make(DEFAULT_TASK, arm=arm, engine="native")
     model, lay = env.model, env.lay
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)

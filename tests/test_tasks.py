@@ -23,7 +23,7 @@ from helpers import FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
-from dpc_mjx.envs import base, registry, wrap_for_training
+from dpc_mjx.envs import DEFAULT_TASK, base, registry, wrap_for_training
 from dpc_mjx.envs.tasks import carrying, pushing, scripts
 from dpc_mjx.robots import objects
 
@@ -273,7 +273,7 @@ def test_registry_names_and_configs():
         "a1_arm/carrying_high",
         "a1_arm/lifting",
         "a1_arm/pushing",
-        "a1_arm/reaching",
+        DEFAULT_TASK,
     ]
     for task, arm in {**_DEFAULTS, "reaching": "regular"}.items():
         assert registry.default_arm(f"a1_arm/{task}") == arm
@@ -286,7 +286,7 @@ def test_the_controller_models_the_bare_a1_on_every_scene():
     """The controller's model (A1 mass, COM offset, inertia) is the robot's own tree without its
     arms, whatever the scene holds: a task's box, balls and tables are not part of the robot
     (before this was fixed, pushing's 1 kg box added 1 kg and moved the COM 4.8 cm forward)."""
-    bare = dpc_mjx.make("a1_arm/reaching", arm="none").controller.idx
+    bare = dpc_mjx.make(DEFAULT_TASK, arm="none").controller.idx
     for task, arm in (*_DEFAULTS.items(), ("carrying", "double")):
         idx = dpc_mjx.make(f"a1_arm/{task}", arm=arm).controller.idx
         assert idx.a1_mass == pytest.approx(bare.a1_mass, rel=1e-9), task

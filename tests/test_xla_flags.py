@@ -1,57 +1,87 @@
-"""dpc_mjx.xla_flags: which XLA flags are added to XLA_FLAGS, and that jax starts with them."""
+"""What `import dpc_mjx` does: XLA_FLAGS only where `xla_flags` says, nothing else loaded, no
+private jax module, no "Failed to import warp" on stdout."""
 
 import os
+import pathlib
+import re
 import subprocess
 import sys
 
+import dpc_mjx
 from dpc_mjx import xla_flags
 
-SCHEDULER = "xla_cpu_enable_concurrency_optimized_scheduler"
+PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "dpc_mjx"
+FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+NEEDS = next(iter(xla_flags.NEEDS_FLAG))
 
 
-def knows(name: str) -> bool:
-    return True  # stands in for a jaxlib that knows every flag
+def test_the_flag_is_set_only_where_xla_flags_is_unset_on_a_jaxlib_that_needs_it():
+    assert xla_flags.FLAG == FLAG
+    assert xla_flags.flags_for({}, NEEDS) == FLAG
+    assert xla_flags.flags_for({"JAX_PLATFORMS": "cpu"}, NEEDS) == FLAG
+    assert xla_flags.flags_for({"JAX_PLATFORMS": "cuda, cpu"}, NEEDS) == FLAG
+    assert xla_flags.flags_for({"JAX_PLATFORMS": "cuda"}, NEEDS) is None  # no CPU backend
+    for users in ("", " ", "--xla_cpu_max_isa=AVX2", FLAG.replace("false", "true")):
+        assert xla_flags.flags_for({"XLA_FLAGS": users}, NEEDS) is None
+    assert xla_flags.flags_for({}, "0.9.2") is None  # measured: runs without it
+    assert xla_flags.flags_for({}, None) is None  # no jaxlib installed
 
 
-def test_a_flag_is_appended_once_and_a_users_setting_is_kept():
-    assert xla_flags.with_flags("", knows=knows) == f"--{SCHEDULER}=false"
-    assert xla_flags.with_flags(" --xla_foo=1 ", knows=knows) == f"--xla_foo=1 --{SCHEDULER}=false"
-    mine = f"--{SCHEDULER}=true --xla_foo=1"
-    assert xla_flags.with_flags(mine, knows=knows) == mine
-    assert xla_flags.with_flags(f"--{SCHEDULER}", knows=knows) == f"--{SCHEDULER}"
-    added_once = xla_flags.with_flags("", knows=knows)
-    assert xla_flags.with_flags(added_once, knows=knows) == added_once
-
-
-def test_a_flag_the_installed_jaxlib_does_not_know_is_never_added():
-    assert xla_flags.with_flags("--xla_foo=1", knows=lambda name: False) == "--xla_foo=1"
-    assert not xla_flags.jaxlib_knows("xla_cpu_no_such_flag_dpc_mjx")
-    # The jaxlibs of constraints.txt and of `make test-latest` know it; a jaxlib that dropped
-    # the flag makes this fail, and the docs' reason for the flag must then be checked again.
-    assert xla_flags.jaxlib_knows(SCHEDULER)
-
-
-def _import_in_a_fresh_python(xla_flags_env: str | None) -> str:
-    """XLA_FLAGS after `import dpc_mjx` in a new process that then runs a jax computation."""
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+def _fresh_python(code: str, xla_flags_env: str | None) -> str:
+    """stdout of `code` in a new process whose XLA_FLAGS is `xla_flags_env` (None: unset)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_PLATFORMS")}
     if xla_flags_env is not None:
         env["XLA_FLAGS"] = xla_flags_env
+    args = [sys.executable, "-c", code]
+    out = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]  # an unknown XLA flag aborts the process
+    return out.stdout
+
+
+def test_import_leaves_a_users_xla_flags_byte_identical_and_loads_no_subpackage():
+    code = (
+        "import os, sys, dpc_mjx; print(repr(os.environ['XLA_FLAGS'])); print(sorted(m for m in "
+        "sys.modules if m.split('.')[0] in ('dpc_mjx', 'jax', 'jaxlib', 'mujoco', 'brax')))"
+    )
+    eager = "['dpc_mjx', 'dpc_mjx._version', 'dpc_mjx.errors', 'dpc_mjx.xla_flags']"
+    for users in ("", "  --xla_cpu_enable_fast_math=false  ", FLAG.replace("false", "true")):
+        assert _fresh_python(code, users).splitlines() == [repr(users), eager]
+
+
+def test_import_sets_the_flag_only_on_a_jaxlib_that_needs_it_and_jax_starts():
     code = (
         "import os, dpc_mjx, jax.numpy as jp; assert float(jp.ones(3).sum()) == 3.0; "
-        "print(os.environ['XLA_FLAGS'])"
+        "print(repr(os.environ.get('XLA_FLAGS')))"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
-    assert out.returncode == 0, out.stderr[-2000:]  # an unknown XLA flag aborts the process
-    return out.stdout.strip().splitlines()[-1]
+    expected = FLAG if xla_flags.jaxlib_version() in xla_flags.NEEDS_FLAG else None
+    assert _fresh_python(code, None).strip() == repr(expected)
 
 
-def test_importing_dpc_mjx_sets_the_flag_before_jax_starts():
-    assert _import_in_a_fresh_python(None) == f"--{SCHEDULER}=false"
-    assert _import_in_a_fresh_python(f"--{SCHEDULER}=true") == f"--{SCHEDULER}=true"
+def test_the_lazy_names_load_and_unknown_names_raise():
+    assert set(dpc_mjx.__all__) <= set(dir(dpc_mjx))
+    assert dpc_mjx.sac is sys.modules["dpc_mjx.sac"]
+    assert dpc_mjx.make is dpc_mjx.envs.make
+    assert dpc_mjx.sweep is sys.modules["dpc_mjx.run.sweep"].sweep
+    try:
+        dpc_mjx.no_such_name  # noqa: B018
+    except AttributeError as e:
+        assert "no_such_name" in str(e)
+    else:
+        raise AssertionError("dpc_mjx.no_such_name did not raise AttributeError")
+
+
+def test_mjx_imported_after_dpc_mjx_prints_nothing():
+    # mujoco.mjx prints "Failed to import warp: ..." when warp is absent (brax imports mjx too,
+    # so dpc_mjx cannot import it first through a helper of its own).
+    code = "import dpc_mjx; from mujoco import mjx; print(mjx.__name__)"
+    assert _fresh_python(code, "") == "mujoco.mjx\n"
+
+
+def test_no_module_reads_a_private_jax_module_or_jaxlibs_files():
+    private = re.compile(r"jax\._src|from jax import _src|find_spec\(\"jaxlib\"\)|\bmmap\b")
+    offenders = [
+        p.relative_to(PACKAGE).as_posix()
+        for p in PACKAGE.rglob("*.py")
+        if private.search(p.read_text())
+    ]
+    assert not offenders, f"modules that read jax's private modules or jaxlib's files: {offenders}"

@@ -1,5 +1,5 @@
 """A trained adapter on disk: `adapter.json` (config, sizes, training history) beside
-`encoder.msgpack` and `decoder.msgpack` (`dpc_mjx.io.serialization`: atomic, checked, no pickle),
+`encoder.msgpack` and `decoder.msgpack` (`dpc_mjx.serialization`: atomic, checked, no pickle),
 and `adapter_log.csv` (the per-epoch losses, for reading).
 
 This is the adapter stage's output inside a run folder, so a run can stop after the adapter and
@@ -14,7 +14,7 @@ import pathlib
 from dpc_mjx.adapter.networks import AdapterConfig, decoder_template, encoder_template
 from dpc_mjx.adapter.train import Adapter
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io.serialization import read_json, read_msgpack, write_json, write_msgpack
+from dpc_mjx.serialization import read_json, read_msgpack, write_json, write_msgpack
 
 RECORD, ENCODER, DECODER = "adapter.json", "encoder.msgpack", "decoder.msgpack"
 LOG = "adapter_log.csv"

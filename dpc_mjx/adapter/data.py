@@ -7,7 +7,7 @@ pushes and payloads (the env's `EnvConfig` distributions), with the env's low-le
 For the adapter the env should be built with `controller="mbc"` (u = 0), so the data show the
 arm's effect on the body the policy will later correct; `collect` warns of nothing and takes any
 env whose observation is `[s_body, s_arm, p_arm, u_obs]`. Each row also keeps, for the policy's
-regression (`sac.warm_start`), the observer's estimate u_obs, the oracle's u (privileged) and the
+regression (`policy.regression`), the observer's estimate u_obs, the oracle's u (privileged) and the
 heading (to turn u into the yaw frame).
 
 s_drp = (roll rate, pitch rate): the trunk's angular velocity about its own x and y axes (rad/s,

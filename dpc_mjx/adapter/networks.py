@@ -46,7 +46,7 @@ class AdapterConfig:
     epochs: int = 60  # budget; the parameters of the best validation epoch are kept
     patience: int = 10  # stop after this many epochs without a better validation loss
     val_fraction: float = 0.1  # held out (the last samples, in time order)
-    seed: int = 0
+    seed: int = 0  # initialisation and batch order; in a run, `RunConfig.seed`
 
     def validate(self) -> None:
         ints = ("latent_size", "batch_size", "epochs", "patience")

@@ -31,7 +31,7 @@ from dpc_mjx.adapter.networks import (
 )
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io.serialization import check_tree
+from dpc_mjx.serialization import check_tree
 
 
 @struct.dataclass

@@ -4,6 +4,7 @@
   gait.py         which feet are in stance, and each swing's progress
   state.py        the body state read from MJX data
   balance.py      the balance QP of the stance forces (model, cost, friction constraints)
+  static_balance.py  can the A1 hold an arm up: standing still, with the QP's constraints
   observer.py     the momentum disturbance observer: u estimated without training or force sensor
   qp/             the batched interior-point QP solver (its __init__ lists its parts)
   swing.py        footholds, swing trajectories and the swing-foot PD

@@ -33,12 +33,15 @@ from dpc_mjx.control.controller import (
     oracle_u,
 )
 from dpc_mjx.control.state import has_fallen, read_state
+from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import perturbed_home
 from dpc_mjx.rotations import roll_pitch_yaw, to_yaw_frame
 
-CONTROLLERS = ("mbc", "oracle", "observer", "given")
+# The bench's u: a `Controller` but DPC (no policy runs here), or GIVEN: u as the caller passes it
+GIVEN = "given"
+CONTROLLERS = (Controller.MBC, Controller.ORACLE, Controller.OBSERVER, GIVEN)
 
 
 @struct.dataclass
@@ -70,7 +73,7 @@ def make_chunk(
     mx: mjx.Model,
     controller: LowLevelController,
     n_ticks: int,
-    kind: str = "mbc",
+    kind: str = Controller.MBC,
     measure_after: float = 1.0,
 ) -> Callable:
     """jit(vmap) of `n_ticks` ticks: `(loop_state, command (B,3), wrench (B,6), u (B,6)) -> state`.
@@ -81,7 +84,10 @@ def make_chunk(
     its COM (world frame) in the simulation. Metrics start after `measure_after` s.
     """
     if kind not in CONTROLLERS:
-        raise DpcError(f"Unknown controller {kind!r}; choose one of {CONTROLLERS}.")
+        raise DpcError(
+            f"Unknown controller {kind!r} for the bench; choose one of "
+            f"{[str(c) for c in CONTROLLERS]} ('dpc': evaluate an env, `run.eval`)."
+        )
     idx, lay = controller.idx, controller.lay
     trunk = idx.trunk
 
@@ -91,11 +97,11 @@ def make_chunk(
         known = jp.concatenate(  # the external wrench moved to the A1 COM
             [wrench[:3], wrench[3:] + jp.cross(d.xipos[trunk] - s.com_pos, wrench[:3])]
         )
-        if kind == "mbc":
+        if kind == Controller.MBC:
             u = jp.zeros(6)
-        elif kind == "oracle":
+        elif kind == Controller.ORACLE:
             u = oracle_u(lay, d, s.com_pos) + known
-        elif kind == "observer":
+        elif kind == Controller.OBSERVER:
             u = None  # the controller's own observer estimate of this tick
         else:
             u = u_given
@@ -163,7 +169,7 @@ def run_locomotion(
     commands,
     n_envs: int = 32,
     seconds: float = 20.0,
-    kind: str = "mbc",
+    kind: str = Controller.MBC,
     seed: int = 0,
     chunk_ticks: int = 250,
 ) -> list[dict[str, float]]:

@@ -4,7 +4,8 @@
 - `config.EnvConfig`: every option, with units and sampling distributions;
 - `observations`: s_body, s_arm, p_arm, `ObsLayout` (slices of the flat obs), privileged block;
 - `disturbances`: commands, arm reference motions, end-effector pushes, payloads;
-- `rewards`: the paper's eqs. 2-4; `wrappers.wrap_for_training`: vmap, episodes, auto-reset;
+- `rewards`: the paper's eqs. 2-4; `outcome`: the per-step metrics and the NaN guard's test;
+- `wrappers.wrap_for_training`: vmap, episodes, auto-reset;
 - `rollout`: the one rollout core (a batch stepped with a policy in jitted chunks, episode
   tallies, per-step records): evaluation, data collection, SAC's evaluation, benchmarks;
 - `registry`: the task table (name -> env class, default config, default arm), `make`, and each
@@ -18,6 +19,7 @@ from dpc_mjx.envs.base import ACTION_SIZE, METRICS, DpcEnv
 from dpc_mjx.envs.config import CONTROLLERS, EnvConfig
 from dpc_mjx.envs.observations import PRIVILEGED, PRIVILEGED_SIZE, S_BODY_SIZE, ObsLayout
 from dpc_mjx.envs.registry import (
+    DEFAULT_TASK,
     build_scene,
     default_arm,
     get_config,
@@ -31,6 +33,7 @@ from dpc_mjx.envs.wrappers import AutoResetWrapper, wrap_for_training
 __all__ = [
     "ACTION_SIZE",
     "CONTROLLERS",
+    "DEFAULT_TASK",
     "METRICS",
     "PRIVILEGED",
     "PRIVILEGED_SIZE",

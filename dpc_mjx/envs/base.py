@@ -5,7 +5,7 @@ step] at the physics rate (250 Hz), with u chosen by `config.controller`. The ph
 `mjx.step`, or MuJoCo C's `mj_step` on the same model with `config.engine = 'native'`
 (`dpc_mjx/physics.py`: sim-to-sim); everything else is the same code under both engines.
 
-    'policy': u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)       (DPC)
+    'dpc'   : u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)   ('policy' too)
               in the yaw frame (turned to the world at each tick) or the world frame
               (`EnvConfig.u_frame`)
     'mbc'   : u = 0, the action is ignored                                       (paper baseline)
@@ -17,7 +17,7 @@ State (brax `State`):
     obs             (obs_size,) [s_body, s_arm, p_arm, u_obs], slices in `env.obs_layout`
     reward          () paper eq. 4 (+ `fall_penalty` on the falling step; 0 on a NaN reset)
     done            () 1.0 on a fall or a non-finite/exploded state
-    metrics         per-step terms (see `METRICS`); wrappers add keys, so we never drop any
+    metrics         per-step terms (`envs.outcome.METRICS`); wrappers add keys: we never drop any
     info            'rng' (2,) key; 'ctrl' ControllerState; 'dist' Disturbances;
                     'sensor_bias' SensorNoise, this episode's sensor biases; 'ctrl_queue'
                     (sensor_delay, nu) ctrl computed but not yet applied (`control/sensors.py`);
@@ -60,9 +60,10 @@ from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
 from dpc_mjx.control.controller import make_controller, oracle_u
 from dpc_mjx.control.state import has_fallen
-from dpc_mjx.envs import observations, rewards
+from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, make_sampler
+from dpc_mjx.envs.outcome import METRICS
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import make_physics
 from dpc_mjx.robots import build
@@ -72,21 +73,6 @@ from dpc_mjx.robots.variants import Arm, RobotSpec
 from dpc_mjx.rotations import wrench_to_world, yaw_of
 
 ACTION_SIZE = 6  # u = [f_a (3), tau_a (3)]
-# Per-step metrics (summed over an episode by brax's EpisodeWrapper):
-METRICS = (
-    "r_vel",  # eq. 2
-    "r_orn",  # eq. 3
-    "r_total",  # eq. 4 (without the fall penalty)
-    "fall",  # 1 on the step that falls
-    "nan_resets",  # 1 on a non-finite/exploded step
-    "vx_sq_err",  # (m/s)^2, yaw-frame forward speed minus command
-    "vy_sq_err",  # (m/s)^2
-    "yaw_rate_sq_err",  # (rad/s)^2
-    "roll_sq",  # rad^2
-    "pitch_sq",  # rad^2
-    "pos_sq_err",  # m^2, trunk (x, y) minus the desired path (`Disturbances.ref_pose`)
-    "ee_sq_err",  # m^2, end-effector tracking error, first order, mean over arms (`_ee_sq_err`)
-)
 _GAITS = {"trot": gait.trot, "stand": gait.stand}
 
 
@@ -249,26 +235,8 @@ class DpcEnv(Env):
             rng, key = jax.random.split(info["rng"])
             tick_keys = None
         dist = self.sampler.advance(info["dist"], d0.time, key)
-        bias, scale = info["sensor_bias"], self.config.sensor_noise
         command = dist.command
-        u_policy = self.policy_u(action)
-
-        def substep(carry, tick_key):
-            d, cs, queue, _ = carry
-            noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
-            u = self.controller_u(d, u_policy)
-            targets = self.arm_targets(dist, d.time, d)
-            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise)
-            if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
-                ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
-            xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
-            xfrc = xfrc.at[self._object_bodies, :3].add(self.sampler.object_forces(dist))
-            d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time, dist)
-            d = self.physics.step(d)
-            return (d, cs, queue, bias if noise is None else noise), None
-
-        carry = (d0, info["ctrl"], info["ctrl_queue"], bias)
-        (d, cs, queue, noise), _ = jax.lax.scan(substep, carry, tick_keys, length=self.n_substeps)
+        d, cs, queue, noise = self._ticks(d0, info, dist, self.policy_u(action), tick_keys)
 
         true_obs = observations.observation(self.lay, d, command, cs.observer.estimate)
         obs = self._measured(true_obs, noise)  # what the policy reads
@@ -277,31 +245,16 @@ class DpcEnv(Env):
         r = rewards.total_reward(vel, command, sb[:2], jp.zeros(2))  # desired roll = pitch = 0
         fall = has_fallen(d.qpos[2], sb[:2])
         privileged = self._privileged(d, dist)
-        bad = ~(
-            _finite(d.qpos, d.qvel, d.ctrl, obs, privileged, cs.forces, cs.qp.x, r["r_total"])
-            & jp.all(jp.abs(d.qvel) <= self.config.explode_speed)
-        )
+        bad = outcome.is_bad(d, obs, privileged, cs, r["r_total"], self.config.explode_speed)
         fall = fall & ~bad
-        err = vel - command
-        new_metrics = {
-            "r_vel": r["r_vel"],
-            "r_orn": r["r_orn"],
-            "r_total": r["r_total"],
-            "fall": fall.astype(jp.float32),
-            "nan_resets": bad.astype(jp.float32),
-            "vx_sq_err": err[0] ** 2,
-            "vy_sq_err": err[1] ** 2,
-            "yaw_rate_sq_err": err[2] ** 2,
-            "roll_sq": sb[0] ** 2,
-            "pitch_sq": sb[1] ** 2,
+        new_metrics = outcome.step_metrics(r, vel - command, sb, fall, bad) | {
             "pos_sq_err": jp.sum((d.qpos[:2] - dist.ref_pose[:2]) ** 2),
             "ee_sq_err": self._ee_sq_err(d, self.arm_targets(dist, d.time, d)),
             **self.task_metrics(d, dist),
         }
-        new_metrics = {  # a bad step reports 0 for every term but `nan_resets`
-            k: jp.where(bad & (k != "nan_resets"), 0.0, v) for k, v in new_metrics.items()
-        }
+        new_metrics = outcome.zero_if_bad(new_metrics, bad)
         reward = r["r_total"] + jp.where(fall, self.config.fall_penalty, 0.0)
+        # the NaN guard: a bad step keeps the previous physics and controller state
         keep = lambda new, old: jp.where(bad, old, new)  # noqa: E731
         d = jax.tree.map(keep, d, d0)
         cs = jax.tree.map(keep, cs, info["ctrl"])
@@ -324,6 +277,31 @@ class DpcEnv(Env):
             info=info,
         )
 
+    def _ticks(self, d0: mjx.Data, info: dict, dist: Disturbances, u_policy, tick_keys):
+        """`n_substeps` x [controller tick -> physics step] from `d0` (one `lax.scan`; u of each
+        tick by `controller_u`): (data, controller state, ctrl queue, the last tick's sensor
+        errors). `tick_keys` (n_substeps, 2) draw the sensor errors (None: exact sensors)."""
+        bias, scale = info["sensor_bias"], self.config.sensor_noise
+        command = dist.command
+
+        def substep(carry, tick_key):
+            d, cs, queue, _ = carry
+            noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
+            u = self.controller_u(d, u_policy)
+            targets = self.arm_targets(dist, d.time, d)
+            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise)
+            if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
+                ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
+            xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
+            xfrc = xfrc.at[self._object_bodies, :3].add(self.sampler.object_forces(dist))
+            d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time, dist)
+            d = self.physics.step(d)
+            return (d, cs, queue, bias if noise is None else noise), None
+
+        carry = (d0, info["ctrl"], info["ctrl_queue"], bias)
+        (d, cs, queue, noise), _ = jax.lax.scan(substep, carry, tick_keys, length=self.n_substeps)
+        return d, cs, queue, noise
+
     # the disturbance u -----------------------------------------------------------------------
 
     def policy_u(self, action: jax.Array) -> jax.Array:
@@ -334,7 +312,7 @@ class DpcEnv(Env):
     def controller_u(self, d, u_policy: jax.Array) -> jax.Array | None:
         """(6,) u of this tick for the controller (world frame, about the A1 COM), by
         `config.controller`, or None for the observer's own estimate; `u_policy` from
-        `policy_u` (used by 'policy' only)."""
+        `policy_u` (used by 'dpc' only)."""
         if self.config.controller == "mbc":
             return jp.zeros(ACTION_SIZE)
         if self.config.controller == "oracle":
@@ -407,7 +385,3 @@ class DpcEnv(Env):
         u = oracle_u(self.lay, d, self._com_pos(d))
         push = self.sampler.pushes(dist, d.time, self._yaw(d)).sum(axis=0)
         return jp.concatenate([u, dist.payload.sum()[None], push])
-
-
-def _finite(*arrays: jax.Array) -> jax.Array:
-    return jp.all(jp.array([jp.all(jp.isfinite(a)) for a in arrays]))

@@ -4,6 +4,14 @@ Every task has its own default (`dpc_mjx.envs.tasks.reaching.default_config()`);
 by keyword (`dpc_mjx.make("a1_arm/reaching", arm="regular", controller="mbc")`) or with
 `config.replace(...)`. Ranges are `(low, high)` tuples of a uniform distribution, `# ~ U(low, high)`
 in the field comments; a range with low == high is a constant.
+
+The fields fall into parts, each readable and replaceable as a whole under the same field names:
+`config.sensors` (`SensorConfig`: the sensor model), `config.disturbances` (`DisturbanceConfig`:
+initial pose, pushes, payload, object weights) and `config.motion` (`MotionConfig`: the velocity
+command and the arm's motion: what the robot is asked to do); the rest (controller, rates, action
+bounds, reward, termination) is the env's own. Every field keeps its flat name everywhere: a `make`
+keyword, a `--set env.NAME` / `--env NAME` key, the export sidecar's `env_config` key, and
+`config.NAME`.
 """
 
 from __future__ import annotations
@@ -12,12 +20,52 @@ import dataclasses
 import math
 from typing import Any
 
+from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import ENGINES
 
-CONTROLLERS = ("policy", "mbc", "oracle", "observer")
+CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
 GAITS = ("trot", "stand")
+
+
+@dataclasses.dataclass(frozen=True)
+class SensorConfig:
+    """The sensor model (`EnvConfig.sensor_noise`, `sensor_delay`)."""
+
+    sensor_noise: float
+    sensor_delay: int
+
+
+@dataclasses.dataclass(frozen=True)
+class DisturbanceConfig:
+    """What pushes the robot off its plan, drawn per episode (`EnvConfig`'s comments)."""
+
+    joint_noise: float
+    push_force: tuple[float, float]
+    push_duration: tuple[float, float]
+    push_axis_weights: tuple[float, float, float]
+    push_gap: tuple[float, float]
+    payload_mass: tuple[float, float]
+    object_mass: tuple[float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionConfig:
+    """What the robot is asked to do: its velocity command and its arm's motion."""
+
+    command_vx: tuple[float, float]
+    command_vy: tuple[float, float]
+    command_yaw: tuple[float, float]
+    command_switch: tuple[float, float]
+    command_after: tuple[float, float, float] | None
+    reach_fraction: float
+    reach_period: tuple[float, float]
+    reach_move_time: float
+    script_rate: tuple[float, float]
+
+
+PARTS = {"sensors": SensorConfig, "disturbances": DisturbanceConfig, "motion": MotionConfig}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -25,8 +73,10 @@ class EnvConfig:
     """What one DPC environment does; units and distributions in the comments."""
 
     # Low-level controller and rates.
-    controller: str = "policy"  # 'policy': u = scaled action; 'mbc': u = 0; 'oracle': measured;
-    # 'observer': u = the momentum observer's estimate (`control/observer.py`)
+    # `dpc_mjx.controllers.Controller` (a plain string works; 'policy' is read as 'dpc'):
+    # 'dpc': u = scaled action; 'mbc': u = 0; 'oracle': measured; 'observer': u = the momentum
+    # observer's estimate (`control/observer.py`)
+    controller: Controller = Controller.DPC
     gait: str = "trot"  # 'trot' or 'stand'
     policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
@@ -103,13 +153,40 @@ class EnvConfig:
     # the pace of the scripted arm motion: its time runs ~ U(script_rate) times as fast.
     script_rate: tuple[float, float] = (1.0, 1.0)
 
+    def __post_init__(self) -> None:
+        # one name per controller: a string or an alias becomes its member ('policy' -> DPC);
+        # an unknown name is left for `validate` to report
+        if not isinstance(self.controller, Controller):
+            try:
+                object.__setattr__(self, "controller", Controller.parse(self.controller))
+            except DpcError:
+                pass
+
+    @property
+    def sensors(self) -> SensorConfig:
+        return self._part(SensorConfig)
+
+    @property
+    def disturbances(self) -> DisturbanceConfig:
+        return self._part(DisturbanceConfig)
+
+    @property
+    def motion(self) -> MotionConfig:
+        return self._part(MotionConfig)
+
+    def _part(self, part: type) -> Any:
+        return part(**{f.name: getattr(self, f.name) for f in dataclasses.fields(part)})
+
     @property
     def u_scale(self) -> tuple[float, ...]:
         """(6,) N, N, N, N·m, N·m, N·m: u = u_scale * a for an action a in [-1, 1]^6."""
         return _per_axis(self.max_force) + _per_axis(self.max_torque)
 
     def replace(self, **overrides: Any) -> EnvConfig:
-        """A validated copy with `overrides`; unknown names raise `DpcError` listing the fields."""
+        """A validated copy with `overrides` by field name, or a whole part by its name
+        (`sensors=SensorConfig(0.0, 0)`, or a dict of some of its fields); unknown names raise
+        `DpcError` listing the fields."""
+        overrides = _flat(overrides)
         names = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(overrides) - names)
         if unknown:
@@ -124,7 +201,7 @@ class EnvConfig:
 
     def validate(self) -> None:
         """Raise `DpcError` naming the first invalid field and what it must be."""
-        _choice("controller", self.controller, CONTROLLERS)
+        Controller.parse(self.controller)
         _choice("gait", self.gait, GAITS)
         _choice("engine", self.engine, ENGINES)
         _choice("u_frame", self.u_frame, U_FRAMES)
@@ -159,6 +236,26 @@ class EnvConfig:
             _number("push_axis_weights", v, low=0.0)
         if not any(v > 0 for v in w):
             raise DpcError("push_axis_weights must have at least one weight > 0.")
+
+
+def _flat(overrides: dict) -> dict:
+    """`overrides` with each part (`PARTS`; an instance, or a dict of some of its fields) spread
+    into its fields; a field named twice raises `DpcError`."""
+    out = {k: v for k, v in overrides.items() if k not in PARTS}
+    for key in overrides.keys() & PARTS.keys():
+        value = overrides[key]
+        fields = dataclasses.asdict(value) if isinstance(value, PARTS[key]) else value
+        own = {f.name for f in dataclasses.fields(PARTS[key])}
+        if not isinstance(fields, dict) or not set(fields) <= own:
+            raise DpcError(
+                f"{key} takes a {PARTS[key].__name__} or a dict of some of {sorted(own)}, got "
+                f"{value!r}."
+            )
+        twice = sorted(fields.keys() & out.keys())
+        if twice:
+            raise DpcError(f"{twice} given both alone and in {key}; give each once.")
+        out.update(fields)
+    return out
 
 
 def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:

@@ -3,8 +3,9 @@
 A name is `<robot>/<task>`. The task table maps a name to the task's env class, its default
 config factory and its default arm, all from the task's module in `dpc_mjx.envs.tasks` (the class
 declares `TASK`, `DEFAULT_ARM`, `check_arm` and `scene_spec`). `make` checks the name, the arm
-(known variant, and one the task can use) and the overrides, raising `DpcError` before anything
-is built or compiled, then builds the env; `scene_spec` / `build_scene` give a task's scene alone.
+(known variant, one the task can use, one the A1 can hold up) and the overrides, raising
+`DpcError` before anything is built or compiled, then builds the env; `scene_spec` /
+`build_scene` give a task's scene alone.
 
     task            default arm   scene
     reaching        regular       robot on a floor; random arm targets, pushes, payloads
@@ -23,6 +24,7 @@ from typing import Any
 
 import mujoco
 
+from dpc_mjx.control.static_balance import require_static_balance
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import carrying, lifting, pushing, reaching
@@ -30,6 +32,7 @@ from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 ROBOT = "a1_arm"
+DEFAULT_TASK = "a1_arm/reaching"  # the training task: every run, evaluation and export's default
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,8 +86,16 @@ def make(name: str, arm: str | Arm | RobotSpec | None = None, **overrides: Any) 
     task = _task(name)
     config = task.default_config().replace(**overrides)
     arm = task.default_arm if arm is None else arm
-    task.env_class.check_arm(resolve(arm))  # a bad or unsuitable arm fails here
+    task.env_class.check_arm(resolve_arm(arm))  # a bad or unsuitable arm fails here
     return task.env_class(config, arm)
+
+
+def resolve_arm(arm: str | Arm | RobotSpec) -> RobotSpec:
+    """`robots.resolve(arm)`, then the A1 holding its arm files up (`control.static_balance`):
+    where an arm comes in (`make`, `scene_spec`, transfer, eval, sweep), before any compile."""
+    spec = resolve(arm)
+    require_static_balance(spec)
+    return spec
 
 
 def scene_spec(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
@@ -98,7 +109,9 @@ def scene_spec(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.Mj
             f"Task {name!r} ({task.env_class.__name__}) has no `scene_spec`; build its env with "
             "`make` and read `env.model`."
         )
-    return scene(task.default_arm if arm is None else arm)
+    arm = task.default_arm if arm is None else arm
+    resolve_arm(arm)
+    return scene(arm)
 
 
 def build_scene(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjModel:

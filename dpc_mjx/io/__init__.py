@@ -15,8 +15,10 @@ The modules, by role:
     load.py           load -> Artefacts: the sidecar checked against itself and every size it
                       declares against its file, then the networks restored; stale, truncated or
                       mismatched files fail with a message saying what to do
-    sidecar.py        the sidecar's keys: building them, reading and cross-checking them
-    serialization.py  checked, atomic files (msgpack, JSON); also the training checkpoints'
+    sidecar.py        the sidecar's keys: building them, reading them
+    sidecar_checks.py the sidecar's fields checked against each other and this library
+    shipped.py        the shipped exports; an export's env options and evaluation cells
+    serialization.py  old path of `dpc_mjx.serialization` (checked, atomic msgpack and JSON)
     inference.py      NumpyPolicy: runs an export with numpy + msgpack only (copy the file alone to
                       a robot's computer; it imports nothing else, not even this package)
 """

@@ -1,6 +1,6 @@
 """Writing an export: `export` (policy, decoder, one encoder per arm, the sidecar) and
 `add_encoder` (one more arm). The networks are checked against each other and the sidecar
-against itself (`sidecar.check`, what `load` checks) before any file is written.
+against itself (`sidecar_checks.check`, what `load` checks) before any file is written.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from dpc_mjx.adapter.networks import (
 )
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import sidecar
-from dpc_mjx.io.serialization import check_tree, jsonable, write_json, write_msgpack
+from dpc_mjx.io import sidecar, sidecar_checks
+from dpc_mjx.policy.policy import PolicyState, policy_template
 from dpc_mjx.robots.spec_json import ArmLike
-from dpc_mjx.sac.policy import PolicyState, policy_template
+from dpc_mjx.serialization import check_tree, jsonable, write_json, write_msgpack
 
 
 def export(
@@ -76,8 +76,8 @@ def export(
             f"Cannot write the sidecar as JSON ({e}); pass sac_config and extra with only "
             "numbers, strings, lists and dicts."
         ) from e
-    declared = sidecar.check(as_read, out / sidecar.SIDECAR)
-    sidecar.check_records(declared)
+    declared = sidecar_checks.check(as_read, out / sidecar.SIDECAR)
+    sidecar_checks.check_records(declared)
     check_tree(
         policy,
         policy_template(
@@ -115,8 +115,8 @@ def add_encoder(
     it in the sidecar (rewritten atomically). `replace=True` overwrites an arm already there."""
     out = pathlib.Path(out_dir)
     meta = sidecar.read(out)
-    declared = sidecar.check(meta, out / sidecar.SIDECAR)
-    sidecar.check_records(declared)
+    declared = sidecar_checks.check(meta, out / sidecar.SIDECAR)
+    sidecar_checks.check_records(declared)
     if arm in meta["encoders"] and not replace:
         raise DpcError(
             f"The export {out} already has an encoder for arm {arm!r}; pass replace=True to "

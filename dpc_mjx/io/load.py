@@ -1,4 +1,4 @@
-"""Reading an export: `load` checks the sidecar against itself (`sidecar.check`), then every
+"""Reading an export: `load` checks the sidecar against itself (`sidecar_checks.check`), then every
 size it declares against the msgpack file that holds it, then restores the networks.
 
 A file check names the file, the sidecar field, the size the sidecar declares, the size the file
@@ -19,6 +19,7 @@ import pathlib
 import re
 from typing import Any
 
+from dpc_mjx import serialization as ser
 from dpc_mjx.adapter.networks import (
     AdapterConfig,
     DecoderState,
@@ -27,11 +28,11 @@ from dpc_mjx.adapter.networks import (
     encoder_template,
 )
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import serialization as ser
-from dpc_mjx.io import sidecar
-from dpc_mjx.io.sidecar import REEXPORT, SIDECAR, Declared
+from dpc_mjx.io import sidecar, sidecar_checks
+from dpc_mjx.io.sidecar import REEXPORT, SIDECAR
+from dpc_mjx.io.sidecar_checks import Declared
+from dpc_mjx.policy.policy import PolicyState, dpc_policy, policy_template
 from dpc_mjx.robots.spec_json import ArmLike, arm_from_json
-from dpc_mjx.sac.policy import PolicyState, dpc_policy, policy_template
 
 _POLICY = "params.params"  # brax's policy MLP: hidden_0 .. hidden_k (the last is the output)
 _MLP = "params.params.mlp"  # the adapter's MLPs: hidden_0 .. hidden_{k-1}, then out
@@ -71,11 +72,11 @@ def load(out_dir: str | pathlib.Path) -> Artefacts:
     against each other, every size against its file, every file against its sha256; any
     disagreement raises `DpcError` saying which and what to do."""
     out = pathlib.Path(out_dir)
-    d = sidecar.check(sidecar.read(out), out / SIDECAR)
+    d = sidecar_checks.check(sidecar.read(out), out / SIDECAR)
     policy = _read(out, _policy_file(d))
     decoder = _read(out, _decoder_file(d))
     encoders = {arm: _read(out, _encoder_file(d, arm)) for arm in d.input_sizes}
-    sidecar.check_records(d)
+    sidecar_checks.check_records(d)
     return Artefacts(d.config, policy, decoder, encoders, d.meta)
 
 

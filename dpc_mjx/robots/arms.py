@@ -1,35 +1,43 @@
 """Arms that mount on the A1 trunk.
 
 `ArmSpec` is a WidowX-like parametric arm built from primitives: waist (yaw), shoulder, elbow and
-wrist (pitch) hinges plus a one-finger parallel gripper. `UrdfArm` is an arm from a file: the
-SO-100 and Unitree Z1 (the example-robot-data wheel's URDFs, shipped in `dpc_mjx/descriptions/`;
-structurally different, used to test transfer) or a user's own URDF or MJCF file
-(`dpc_mjx.robots.arm_file`; another of the optional wheel's: `dpc_mjx.assets.wheel_urdf`).
+wrist (pitch) hinges plus a one-finger parallel gripper (built here). `UrdfArm` is an arm from a
+file: the SO-100 and Unitree Z1 (the example-robot-data wheel's URDFs, shipped in
+`dpc_mjx/descriptions/`; structurally different, used to test transfer) or a user's own URDF or
+MJCF file (`dpc_mjx.robots.urdf_arm`, read by `dpc_mjx.robots.arm_file`; another of the optional
+wheel's: `dpc_mjx.assets.wheel_urdf`).
 
 Every arm is built as its own `MjSpec` whose root body (the arm's base, fixed to the trunk) holds a
-site `mount` with a force and a torque sensor, and is attached to the trunk with a name prefix
-`arm<i>/`. MuJoCo's force/torque sensors read the wrench the *trunk exerts on the arm* at that site,
-in the site frame; `dpc_mjx.robots.layout` turns this into the wrench the arm puts on the trunk.
+site `mount` with a force and a torque sensor (`dpc_mjx.robots.mount`), and is attached to the
+trunk with a name prefix `arm<i>/`. MuJoCo's force/torque sensors read the wrench the *trunk
+exerts on the arm* at that site, in the site frame; `dpc_mjx.robots.layout` turns this into the
+wrench the arm puts on the trunk. The names of `mount` and `urdf_arm` stay importable from here.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import pathlib
 
 import mujoco
 import numpy as np
 
-from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1, arm_file
-from dpc_mjx.robots.urdf import VISUAL_GROUP, make_visual
-
-MOUNT_SITE = "mount"
-EE_SITE = "ee"
-FORCE_SENSOR = "mount_force"  # N, site frame
-TORQUE_SENSOR = "mount_torque"  # N·m, site frame
+from dpc_mjx.robots import a1
+from dpc_mjx.robots.mount import (
+    ARM_ARMATURE,
+    ARM_DAMPING,
+    EE_SITE,
+    FORCE_SENSOR,
+    MOUNT_SITE,
+    TORQUE_SENSOR,
+    Mount,
+    Servo,
+    add_mount_sensors,
+    add_servo,
+)
+from dpc_mjx.robots.urdf import make_visual
+from dpc_mjx.robots.urdf_arm import URDF_ARMS, UrdfArm, urdf_arm_spec
 
 # Fixed geometry of the parametric arm (m).
 BASE_HEIGHT = 0.03  # mount plate to waist joint
@@ -42,39 +50,6 @@ FINGER_MASS_FRACTION = 0.2  # of gripper_mass; the palm carries the rest
 EE_SHAPES = ("gripper", "plate")
 PLATE_OFFSET = 0.01  # wrist end to the plate's back face
 PLATE_HALF = (0.005, 0.06, 0.04)  # half extents: thickness (along the wrist), width, height
-
-ARM_ARMATURE = 0.01  # kg·m² on every arm joint, keeps stiff position servos stable at dt 4 ms
-ARM_DAMPING = 0.05  # N·m·s/rad
-
-
-@dataclasses.dataclass(frozen=True)
-class Mount:
-    """Where an arm's base sits on the trunk: position (m) in the trunk frame and yaw (rad)."""
-
-    pos: tuple[float, float, float] = (0.09, 0.0, a1.TRUNK_HALF_EXTENTS[2])
-    yaw: float = 0.0
-
-    def validate(self, what: str = "mount") -> None:
-        values = (*self.pos, self.yaw)
-        if len(self.pos) != 3 or not all(math.isfinite(float(v)) for v in values):
-            raise DpcError(f"{what}: pos must be 3 finite numbers and yaw finite, got {self}.")
-        for axis, v, half in zip("xyz", self.pos, a1.TRUNK_HALF_EXTENTS, strict=True):
-            if abs(v) > half + 1e-9:
-                raise DpcError(
-                    f"{what}: pos {axis}={v:.3f} m is outside the A1 trunk (|{axis}| <= {half} m); "
-                    f"mount the arm on the trunk, e.g. on its top face "
-                    f"z={a1.TRUNK_HALF_EXTENTS[2]}."
-                )
-
-
-@dataclasses.dataclass(frozen=True)
-class Servo:
-    """Position servo of one arm joint: gains and force limit."""
-
-    kp: float  # N·m/rad (N/m for the finger)
-    kv: float  # N·m·s/rad
-    force: float  # N·m (N for the finger)
-
 
 # Joint name -> servo, in kinematic order.
 WIDOWX_SERVOS = {
@@ -155,101 +130,11 @@ class ArmSpec:
         self.mount.validate(f"{what}.mount")
 
 
-@dataclasses.dataclass(frozen=True)
-class UrdfArm:
-    """An arm from a file, attached at `mount`: a name the library knows ('so100', 'z1', shipped
-    copies of the example-robot-data wheel's URDFs) or the path of your own URDF or MJCF file
-    (`dpc_mjx.robots.arm_file` says what the file needs and what is inferred).
-
-    ee_body and ee_offset (m, in ee_body's frame): where the end effector is; home: (joint, value)
-    pairs of the home pose (rad, m for a slide), joints not named at 0 (clipped into their range).
-    None or () takes the named arm's values, or for a file what `arm_file` infers. The body welded
-    to the trunk is always inferred (the file's root link).
-    """
-
-    urdf: str  # a name of URDF_ARMS, or the path of a .urdf or MJCF .xml file
-    mount: Mount = Mount()
-    ee_body: str | None = None
-    ee_offset: tuple[float, float, float] | None = None
-    home: tuple[tuple[str, float], ...] = ()
-
-    @property
-    def is_file(self) -> bool:
-        """Whether this arm is a user's file rather than a named arm."""
-        return self.urdf not in URDF_ARMS
-
-    @property
-    def name(self) -> str:
-        """The arm's short name: the named arm's, or the file's stem (`my_arm` for my_arm.urdf)."""
-        return pathlib.Path(self.urdf).stem if self.is_file else self.urdf
-
-    def read(self) -> arm_file.ArmFile:
-        """The arm's file read and checked (cached per file); `DpcError` if it cannot be used."""
-        if not self.is_file:
-            info = URDF_ARMS[self.urdf]
-            return arm_file.read(
-                assets.urdf_path(self.urdf),
-                ee_body=self.ee_body or info.ee_body,
-                keep_meshes=False,
-            )
-        return arm_file.read(self.urdf, ee_body=self.ee_body)
-
-    def home_pose(self) -> dict[str, float]:
-        """Home value (rad, m) per joint of the arm (names without the attach prefix)."""
-        read = self.read()
-        home = arm_file.default_home(read)
-        if not self.is_file:
-            for name, q in URDF_ARMS[self.urdf].home.items():
-                home[name] = float(np.clip(q, *arm_file.inside(read.joints[name])))
-        return {**home, **dict(self.home)}
-
-    @property
-    def offset(self) -> tuple[float, float, float]:
-        """ee_offset, or the named arm's (m, in ee_body's frame; a file's default is 0)."""
-        if self.ee_offset is not None:
-            return self.ee_offset
-        return (0.0, 0.0, 0.0) if self.is_file else URDF_ARMS[self.urdf].ee_offset
-
-    def validate(self, what: str = "arm") -> None:
-        if self.is_file and pathlib.Path(self.urdf).suffix.lower() not in arm_file.SUFFIXES:
-            raise DpcError(
-                f"{what}: unknown URDF arm {self.urdf!r}; known: {sorted(URDF_ARMS)}, or give the "
-                "path of a .urdf or MJCF .xml file."
-            )
-        offset = self.offset
-        if len(offset) != 3 or not all(math.isfinite(float(v)) for v in offset):
-            raise DpcError(f"{what}: ee_offset must be 3 finite numbers (m), got {offset!r}.")
-        names = [pair[0] for pair in self.home]
-        if len(set(names)) != len(names) or not all(len(pair) == 2 for pair in self.home):
-            raise DpcError(
-                f"{what}: home must be (joint, value) pairs, each joint once: {self.home}"
-            )
-        arm_file.check_home(self.read(), dict(self.home), what)
-        self.mount.validate(f"{what}.mount")
-
-
-@dataclasses.dataclass(frozen=True)
-class _UrdfArmInfo:
-    ee_body: str
-    ee_offset: tuple[float, float, float]  # m, in ee_body's frame
-    home: dict[str, float]  # rad; joints not named start at 0 clipped into their range
-
-
-URDF_ARMS = {
-    # SO-100 (5 DOF + jaw). Its URDF <limit effort=35> is far above the real servos; we cap gains.
-    "so100": _UrdfArmInfo("gripper", (0.0, -0.09, 0.0), {"shoulder_lift": 0.3}),
-    # Unitree Z1 (6 DOF + gripper), folded in its URDF zero pose; its massless `world` link is
-    # skipped as the root (`arm_file`).
-    "z1": _UrdfArmInfo("link06", (0.15, 0.0, 0.0), {}),
-}
-_URDF_KP_CAP = 40.0  # N·m/rad
-
-
 def arm_spec(arm: ArmSpec | UrdfArm) -> mujoco.MjSpec:
     """The arm alone as a spec: one root body at the origin (to attach at a trunk site)."""
     if isinstance(arm, ArmSpec):
         return _widowx_spec(arm)
-    return _urdf_arm_spec(arm)
+    return urdf_arm_spec(arm)
 
 
 def home_qpos(arm: ArmSpec | UrdfArm, prefix: str) -> dict[str, float]:
@@ -257,22 +142,6 @@ def home_qpos(arm: ArmSpec | UrdfArm, prefix: str) -> dict[str, float]:
     if isinstance(arm, ArmSpec):
         return {prefix + name: 0.0 for name in arm.joints}
     return {prefix + name: q for name, q in arm.home_pose().items()}
-
-
-def _add_mount_sensors(spec: mujoco.MjSpec, root: mujoco.MjsBody) -> None:
-    root.add_site(name=MOUNT_SITE, size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES)
-    for kind, name in (
-        (mujoco.mjtSensor.mjSENS_FORCE, FORCE_SENSOR),
-        (mujoco.mjtSensor.mjSENS_TORQUE, TORQUE_SENSOR),
-    ):
-        spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=MOUNT_SITE)
-
-
-def _add_servo(spec: mujoco.MjSpec, joint: str, servo: Servo) -> None:
-    act = spec.add_actuator(name=joint, target=joint, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    act.set_to_position(kp=servo.kp, kv=servo.kv)
-    act.forcelimited = True
-    act.forcerange = [-servo.force, servo.force]
 
 
 def _set_inertia(body: mujoco.MjsBody, mass: float, com: tuple, inertia: np.ndarray) -> None:
@@ -309,7 +178,7 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
     base = spec.worldbody.add_body(name="base")
     base.fuse = 0  # keep the welded base apart from the trunk: the mount sensors live in it
     _add_post(base, arm.base_mass, BASE_HEIGHT, 0.04, rgba)
-    _add_mount_sensors(spec, base)
+    add_mount_sensors(spec, base)
 
     turret = base.add_body(name="turret", pos=[0, 0, BASE_HEIGHT])
     turret_h = arm.shoulder_height - BASE_HEIGHT
@@ -356,7 +225,7 @@ def _widowx_spec(arm: ArmSpec) -> mujoco.MjSpec:
             armature=ARM_ARMATURE,
             damping=[ARM_DAMPING, 0, 0],
         )
-        _add_servo(spec, name, WIDOWX_SERVOS[name])
+        add_servo(spec, name, WIDOWX_SERVOS[name])
 
     for geom in spec.geoms:
         make_visual(geom)
@@ -421,34 +290,23 @@ def _add_plate(gripper: mujoco.MjsBody, mass: float, rgba: list) -> None:
     )
 
 
-def _urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
-    read = arm.read()
-    spec = read.spec
-    spec.modelname = arm.name
-    root = spec.body(read.root)
-    root.fuse = 0  # keep the root body apart from the trunk: the mount sensors live in it
-    _add_mount_sensors(spec, root)
-    spec.body(read.ee_body).add_site(
-        name=EE_SITE, pos=list(arm.offset), size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES
-    )
-    if not arm.is_file or not read.has_geometry:
-        # Capsules between successive joint origins, so the arm is visible without its meshes.
-        for body in spec.bodies:
-            if body.name in ("world", read.root):
-                continue
-            if np.linalg.norm(body.pos) > 1e-3:
-                body.parent.add_geom(
-                    type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                    size=[0.012, 0, 0],
-                    fromto=[0, 0, 0, *body.pos],
-                )
-    for joint in spec.joints:
-        joint.armature = ARM_ARMATURE
-        joint.damping = [max(joint.damping[0], ARM_DAMPING), 0, 0]
-        effort = float(joint.actfrcrange[1]) or _URDF_KP_CAP
-        kp = min(effort, _URDF_KP_CAP)
-        _add_servo(spec, joint.name, Servo(kp=kp, kv=0.05 * kp, force=effort))
-    for geom in spec.geoms:
-        make_visual(geom)
-        geom.group = VISUAL_GROUP
-    return spec
+__all__ = [  # with the names of `robots.mount` and `robots.urdf_arm` imported from here before
+    "ARM_ARMATURE",
+    "ARM_DAMPING",
+    "EE_SHAPES",
+    "EE_SITE",
+    "FORCE_SENSOR",
+    "MOUNT_SITE",
+    "TORQUE_SENSOR",
+    "URDF_ARMS",
+    "WIDOWX_RANGES",
+    "WIDOWX_SERVOS",
+    "ArmSpec",
+    "Mount",
+    "Servo",
+    "UrdfArm",
+    "arm_spec",
+    "box_inertia",
+    "home_qpos",
+    "rod_inertia",
+]

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import pathlib
 
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import a1
@@ -79,7 +78,9 @@ VARIANTS: dict[str, RobotSpec] = {
 
 
 def resolve(robot: str | Arm | RobotSpec) -> RobotSpec:
-    """A variant name, a single arm or a `RobotSpec`, as a validated `RobotSpec`."""
+    """A variant name, a single arm or a `RobotSpec`, as a validated `RobotSpec`: a lookup (an arm
+    file is read and checked, nothing compiled; whether the A1 can hold it up is
+    `control.static_balance`, checked by `envs.registry.resolve_arm`)."""
     if isinstance(robot, str):
         if robot not in VARIANTS:
             raise DpcError(f"Unknown arm variant {robot!r}; known variants: {sorted(VARIANTS)}.")
@@ -94,12 +95,6 @@ def resolve(robot: str | Arm | RobotSpec) -> RobotSpec:
             f"got {type(robot).__name__}."
         )
     spec.validate()
-    files = [arm for arm in spec.arms if isinstance(arm, UrdfArm) and arm.is_file]
-    if files:
-        from dpc_mjx.robots.static_balance import require_static_balance  # noqa: PLC0415
-
-        stamps = tuple(pathlib.Path(arm.urdf).stat().st_mtime_ns for arm in files)
-        require_static_balance(spec, stamps)
     return spec
 
 

@@ -6,7 +6,7 @@ This layer orchestrates the others and nothing below imports it:
 - `pipeline`: a whole run as one function (data -> adapter -> SAC -> export -> evaluation),
   and what one does with an export (`evaluate_export`, `transfer_arm`);
 - `eval`: the evaluation protocol (cells of arm x controller, intervals, per-episode CSV);
-  `stats`: the confidence intervals;
+  `report`: per-episode CSVs read back, paired and formatted (intervals: `dpc_mjx.stats`);
 - `cli`: the `dpc-mjx` command; `demo`: `make demo` and `dpc-mjx variants`;
 - `bench`: env vs physics throughput (`dpc-mjx bench`); `plots`: the run's figures.
 """

@@ -5,20 +5,20 @@ Per batch: the env through the rollout core (`envs.rollout.make_chunk` of one st
 [controller tick + mjx.step], disturbances, obs, reward, NaN guard, the episode tally; zero
 actions with the 'policy' controller) and MJX physics alone (`sim.make_rollout`
 with 5 steps per call, robot standing on leg servos), both counted in env steps of 20 ms (5
-physics steps), one call per env step, after a first call that compiles (timed apart).
+physics steps), one call per env step, after a first call that compiles (timed apart,
+`timing.time_calls`).
 """
 
 from __future__ import annotations
-
-import time
 
 import jax
 import numpy as np
 
 from dpc_mjx import sim
 from dpc_mjx.envs import rollout
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
+from dpc_mjx.timing import time_calls  # also imported from here (run.demo)
 
 HEADER = (
     "| batch | env steps/s (full env) | env steps/s (physics only) | env / physics "
@@ -26,19 +26,7 @@ HEADER = (
 )
 
 
-def time_calls(fn, x, calls: int):
-    """Time `x = fn(x)`: (compile + first call s, s per later call of `calls`, the last x)."""
-    t0 = time.perf_counter()
-    x = jax.block_until_ready(fn(x))
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for _ in range(calls):
-        x = fn(x)
-    jax.block_until_ready(x)
-    return first, (time.perf_counter() - t0) / calls, x
-
-
-def bench_env(arm: str, batch: int, calls: int, task: str = "a1_arm/reaching") -> dict:
+def bench_env(arm: str, batch: int, calls: int, task: str = DEFAULT_TASK) -> dict:
     """{'env_sps', 'phys_sps' (env steps/s), 'env_compile', 'phys_compile' (s)} at `batch`."""
     env = make(task, arm=arm)
     carry, key = rollout.start(env, batch, seed=0)

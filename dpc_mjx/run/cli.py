@@ -29,7 +29,13 @@ import json
 import pathlib
 import sys
 
+from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
+
+_CONTROLLERS = [c.value for c in Controller]  # mbc observer dpc oracle, `dpc_mjx.controllers`
+_NAMES = " ".join(_CONTROLLERS)
+_CONTROLLERS_HELP = f"any of {_NAMES} (default: all four)"
+_TASK_HELP = "a task (`dpc_mjx.envs.known_tasks()`; default: reaching, `envs.DEFAULT_TASK`)"
 
 
 def _parse_sets(items: list[str]) -> dict:
@@ -47,7 +53,7 @@ def _parse_sets(items: list[str]) -> dict:
 
 
 def _run_config(args: argparse.Namespace):
-    from dpc_mjx.run.config import recipe
+    from dpc_mjx.run.config import recipe  # noqa: PLC0415 (subcommand handler)
 
     named = {k: getattr(args, k) for k in ("arm", "samples", "task") if getattr(args, k, None)}
     if getattr(args, "timesteps", None):
@@ -56,7 +62,7 @@ def _run_config(args: argparse.Namespace):
         named["eval_episodes"] = args.episodes
     device = getattr(args, "device", "cpu")
     if device == "auto":
-        import jax
+        import jax  # noqa: PLC0415 (jax only for --device auto)
 
         device = jax.default_backend()
         print(f"device: {device} ({jax.device_count()} x {jax.devices()[0].device_kind})")
@@ -65,8 +71,8 @@ def _run_config(args: argparse.Namespace):
 
 
 def _train(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.config import read_run_config
-    from dpc_mjx.run.pipeline import train_and_evaluate
+    from dpc_mjx.run.config import read_run_config  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.run.pipeline import train_and_evaluate  # noqa: PLC0415 (subcommand handler)
 
     run = pathlib.Path(args.run)
     config = read_run_config(run) if args.resume and not args.set else _run_config(args)
@@ -75,8 +81,8 @@ def _train(args: argparse.Namespace) -> None:
 
 
 def _train_adapter(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.config import start_run
-    from dpc_mjx.run.pipeline import train_adapter
+    from dpc_mjx.run.config import start_run  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.run.pipeline import train_adapter  # noqa: PLC0415 (subcommand handler)
 
     run = pathlib.Path(args.run)
     config = _run_config(args)
@@ -86,13 +92,14 @@ def _train_adapter(args: argparse.Namespace) -> None:
 
 
 def _transfer(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.pipeline import transfer_arm
+    from dpc_mjx.run.pipeline import transfer_arm  # noqa: PLC0415 (subcommand handler)
 
-    transfer_arm(args.export, args.arm, samples=args.samples, task=args.task, seed=args.seed)
+    transfer_arm(args.export, args.arm, **_given(args, ("samples", "task", "seed")))
 
 
 def _eval(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
+    from dpc_mjx.io.shipped import SHIPPED  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.run.pipeline import evaluate_export  # noqa: PLC0415 (subcommand handler)
 
     prefix = "native-" if args.engine == "native" else ""
     evaluate_export(args.export or SHIPPED, **_cells(args, prefix), env=_env_options(args))
@@ -101,9 +108,12 @@ def _eval(args: argparse.Namespace) -> None:
 def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
     """The keyword arguments that `eval` and `sim2sim` share (`eval_options`), CSV defaulted."""
     names = ("arms", "controllers", "task", "episodes", "steps", "seed", "out")
-    return {k: getattr(args, k) for k in names} | {
-        "csv": args.csv or _default_csv(args, csv_prefix)
-    }
+    return _given(args, names) | {"csv": args.csv or _default_csv(args, csv_prefix)}
+
+
+def _given(args: argparse.Namespace, names: tuple[str, ...]) -> dict:
+    """The options `names` that have a value (None: the library's default, e.g. the task)."""
+    return {k: getattr(args, k) for k in names if getattr(args, k) is not None}
 
 
 def _env_options(args: argparse.Namespace) -> dict:
@@ -117,14 +127,14 @@ def _env_options(args: argparse.Namespace) -> dict:
 
 
 def _sim2sim(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.pipeline import SHIPPED
-    from dpc_mjx.run.sim2sim import sim2sim
+    from dpc_mjx.io.shipped import SHIPPED  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.run.sim2sim import sim2sim  # noqa: PLC0415 (subcommand handler)
 
     sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=_parse_sets(args.env))
 
 
 def _sweep(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.sweep import sweep
+    from dpc_mjx.run.sweep import sweep  # noqa: PLC0415 (subcommand handler)
 
     names = ("controllers", "task", "episodes", "steps", "seed", "out")
     sweep(
@@ -132,16 +142,16 @@ def _sweep(args: argparse.Namespace) -> None:
         upper_arm=args.upper_arm,
         gripper_mass=args.gripper_mass,
         env=_parse_sets(args.env),
-        **{k: getattr(args, k) for k in names},
+        **_given(args, names),
     )
 
 
 def _render(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.render import render_rollout
+    from dpc_mjx.run.render import render_rollout  # noqa: PLC0415 (subcommand handler)
 
     render_rollout(
         args.out,
-        task=args.task,
+        **_given(args, ("task",)),
         arm=args.arm,
         controllers=tuple(args.compare or [args.controller]),
         export=args.export,
@@ -158,37 +168,39 @@ def _default_csv(args: argparse.Namespace, prefix: str = "") -> pathlib.Path:
     """Beside `--out` (same name, .csv), else runs/eval/<prefix><task>-seed<seed>.csv."""
     if args.out:
         return pathlib.Path(args.out).with_suffix(".csv")
-    name = f"{prefix}{args.task.replace('/', '-')}-seed{args.seed}.csv"
+    from dpc_mjx.envs.registry import DEFAULT_TASK  # noqa: PLC0415 (subcommand handler)
+
+    name = f"{prefix}{(args.task or DEFAULT_TASK).replace('/', '-')}-seed{args.seed}.csv"
     return pathlib.Path("runs", "eval", name)
 
 
 def _export(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.pipeline import export_run
+    from dpc_mjx.run.pipeline import export_run  # noqa: PLC0415 (subcommand handler)
 
     print(f"exported to {export_run(args.run, args.out)}")
 
 
 def _bench(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.bench import print_table
+    from dpc_mjx.run.bench import print_table  # noqa: PLC0415 (subcommand handler)
 
     print_table(args.arm, args.batches, args.calls)
 
 
 def _demo(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.demo import run_demo
+    from dpc_mjx.run.demo import run_demo  # noqa: PLC0415 (subcommand handler)
 
     run_demo(quick=args.quick)
 
 
 def _variants(args: argparse.Namespace) -> None:
-    from dpc_mjx.robots import VARIANTS
-    from dpc_mjx.run.demo import run_variants
+    from dpc_mjx.robots import VARIANTS  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.run.demo import run_variants  # noqa: PLC0415 (subcommand handler)
 
     run_variants(args.variants or tuple(VARIANTS), batch=args.batch, seconds=args.seconds)
 
 
 def _mjcf(args: argparse.Namespace) -> None:
-    from dpc_mjx.robots.mjcf import write_mjcf
+    from dpc_mjx.robots.mjcf import write_mjcf  # noqa: PLC0415 (subcommand handler)
 
     for path in write_mjcf(args.out_dir):
         print(path)
@@ -205,43 +217,24 @@ def _parser() -> argparse.ArgumentParser:
     runs.add_argument("--num-processes", type=int, metavar="N")
     runs.add_argument("--process-id", type=int, metavar="I", help="0 .. N-1, one per process")
     sub = parser.add_subparsers(dest="command", required=True)
+    _training_commands(sub)
+    _evaluation_commands(sub)
+    _tool_commands(sub)
+    return parser
 
-    def run_options(p, resume: bool):
-        p.add_argument("--run", required=True, help="run folder (created)")
-        p.add_argument("--arm", help="arm variant (default regular)")
-        p.add_argument("--task", help="task (default a1_arm/reaching)")
-        p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
-        p.add_argument(
-            "--recipe",
-            default="default",
-            help="named settings the --set options change: default (the oracle regression), "
-            "paper (SAC from a random actor, asymmetric critic)",
-        )
-        p.add_argument(
-            "--device",
-            choices=["auto", "cpu", "gpu"],
-            default="auto",
-            help="settings preset for the accelerator (default auto: the one JAX runs on; "
-            "docs/benchmarks.md, run.config.DEVICE_PRESETS)",
-        )
-        p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
-        if resume:
-            p.add_argument(
-                "--timesteps", type=int, help="SAC env steps after the regression (default 0: none)"
-            )
-            p.add_argument("--episodes", type=int, help="evaluation episodes (default 64)")
-            p.add_argument("--resume", action="store_true", help="continue a killed run")
 
+def _training_commands(sub) -> None:
+    """demo, train, train-adapter, transfer."""
     p = sub.add_parser("demo", help="a small run, then MBC / observer / DPC (minutes)")
     p.add_argument("--quick", action="store_true", help="an even smaller budget (smoke run)")
     p.set_defaults(handler=_demo)
 
     p = sub.add_parser("train", help="the whole pipeline into a run folder")
-    run_options(p, resume=True)
+    _run_options(p, resume=True)
     p.set_defaults(handler=_train)
 
     p = sub.add_parser("train-adapter", help="only collect data and train the adapter")
-    run_options(p, resume=False)
+    _run_options(p, resume=False)
     p.set_defaults(handler=_train_adapter)
 
     p = sub.add_parser("transfer", help="train a new arm's encoder against a frozen decoder")
@@ -253,52 +246,42 @@ def _parser() -> argparse.ArgumentParser:
         "description (README: Your own arm)",
     )
     p.add_argument("--samples", type=int, default=30_000)
-    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--task", help=_TASK_HELP)
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(handler=_transfer)
 
-    def eval_options(p):
-        p.add_argument(
-            "--export", help="an export folder (default: the shipped dpc_mjx/artefacts/regular)"
-        )
-        p.add_argument(
-            "--arms",
-            nargs="+",
-            help="arms: encoder names, variants, arm files or descriptions (default: the arm "
-            "the policy was trained on)",
-        )
-        p.add_argument(
-            "--controllers",
-            nargs="+",
-            default=["mbc", "observer", "dpc", "oracle"],
-            help="any of mbc observer dpc oracle (default: all four)",
-        )
-        p.add_argument("--task", default="a1_arm/reaching")
-        p.add_argument("--episodes", type=int, default=64)
-        p.add_argument(
-            "--steps",
-            type=int,
-            help="env steps of 20 ms per episode (default: the task's episode length; "
-            "reaching 1000 = 20 s, pushing 500, carrying 650, lifting 1000)",
-        )
-        p.add_argument("--seed", type=int, default=1000)
-        p.add_argument("--out", help="also write the table to this markdown file")
-        p.add_argument(
-            "--env",
-            nargs="*",
-            default=[],
-            metavar="NAME=VALUE",
-            help="env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact "
-            "sensors)",
-        )
-        p.add_argument(
-            "--csv",
-            help="one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>"
-            ".csv)",
-        )
 
+def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
+    p.add_argument("--run", required=True, help="run folder (created)")
+    p.add_argument("--arm", help="arm variant (default regular)")
+    p.add_argument("--task", help=_TASK_HELP)
+    p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
+    p.add_argument(
+        "--recipe",
+        default="default",
+        help="named settings the --set options change: default (the oracle regression), "
+        "paper (SAC from a random actor, asymmetric critic)",
+    )
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "gpu"],
+        default="auto",
+        help="settings preset for the accelerator (default auto: the one JAX runs on; "
+        "docs/benchmarks.md, run.config.DEVICE_PRESETS)",
+    )
+    p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
+    if resume:
+        p.add_argument(
+            "--timesteps", type=int, help="SAC env steps after the regression (default 0: none)"
+        )
+        p.add_argument("--episodes", type=int, help="evaluation episodes (default 64)")
+        p.add_argument("--resume", action="store_true", help="continue a killed run")
+
+
+def _evaluation_commands(sub) -> None:
+    """eval, sim2sim, sweep."""
     p = sub.add_parser("eval", help="MBC / observer / DPC / oracle, 95%% intervals")
-    eval_options(p)
+    _eval_options(p)
     p.add_argument(
         "--engine",
         choices=["mjx", "native"],
@@ -308,17 +291,15 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=_eval)
 
     p = sub.add_parser("sim2sim", help="the eval cells in MJX and in native MuJoCo, side by side")
-    eval_options(p)
+    _eval_options(p)
     p.set_defaults(handler=_sim2sim)
 
     p = sub.add_parser("sweep", help="every controller over a grid of arm lengths and masses")
     p.add_argument("--export", help="an export folder (default: the shipped one); its arm")
-    p.add_argument(
-        "--upper-arm", default="0.10:0.30:8", help="upper-arm lengths, m, low:high:count"
-    )
+    p.add_argument("--upper-arm", default="0.10:0.30:8", help="upper-arm length, m, low:high:count")
     p.add_argument("--gripper-mass", default="0.1:0.6:8", help="gripper masses, kg, low:high:count")
-    p.add_argument("--controllers", nargs="+", default=["mbc", "observer", "dpc", "oracle"])
-    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
+    p.add_argument("--task", help=_TASK_HELP)
     p.add_argument("--episodes", type=int, default=16, help="per grid point")
     p.add_argument("--steps", type=int, help="env steps per episode (default: the task's)")
     p.add_argument("--seed", type=int, default=1000)
@@ -326,6 +307,30 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="runs/sweep", help="folder for the CSVs and heatmaps")
     p.set_defaults(handler=_sweep)
 
+
+def _eval_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--export", help="an export folder (default: the shipped artefacts/regular)")
+    arms = "arms: encoder names, variants, arm files or descriptions (default: the policy's arm)"
+    p.add_argument("--arms", nargs="+", help=arms)
+    p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
+    p.add_argument("--task", help=_TASK_HELP)
+    p.add_argument("--episodes", type=int, default=64)
+    p.add_argument(
+        "--steps",
+        type=int,
+        help="env steps of 20 ms per episode (default: the task's episode length; "
+        "reaching 1000 = 20 s, pushing 500, carrying 650, lifting 1000)",
+    )
+    p.add_argument("--seed", type=int, default=1000)
+    p.add_argument("--out", help="also write the table to this markdown file")
+    env = "env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact sensors)"
+    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
+    csv = "one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)"
+    p.add_argument("--csv", help=csv)
+
+
+def _tool_commands(sub) -> None:
+    """export, bench, render, variants, mjcf."""
     p = sub.add_parser("export", help="export a run's adapter and policy")
     p.add_argument("--run", required=True)
     p.add_argument("--out", help="export folder (default: run/export)")
@@ -339,12 +344,10 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="a video (MP4 or GIF) of an episode, headless")
     p.add_argument("--out", required=True, help="clip.mp4 or clip.gif")
-    p.add_argument("--task", default="a1_arm/reaching")
+    p.add_argument("--task", help=_TASK_HELP)
     p.add_argument("--arm", default="regular", help="a variant, an arm file or description")
-    p.add_argument("--controller", default="mbc", help="mbc, observer, dpc or oracle")
-    p.add_argument(
-        "--compare", nargs="+", help="several controllers side by side on the same episode"
-    )
+    p.add_argument("--controller", default=Controller.MBC.value, help=f"one of {_NAMES}")
+    p.add_argument("--compare", nargs="+", help="several controllers side by side, same episode")
     p.add_argument("--export", help="for dpc and the env options (default: the shipped export)")
     p.add_argument("--seconds", type=float, default=2.0)
     p.add_argument("--seed", type=int, default=0, help="as dpc-mjx eval --seed")
@@ -368,13 +371,12 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("mjcf", help="write every variant's robot and scene MJCF")
     p.add_argument("out_dir", nargs="?", default="mjcf")
     p.set_defaults(handler=_mjcf)
-    return parser
 
 
 def _join_processes(args: argparse.Namespace) -> None:
     """`jax.distributed` for a run of several processes (from the options, else the environment:
     JAX_COORDINATOR_ADDRESS, DPC_NUM_PROCESSES, DPC_PROCESS_ID), before any device is touched."""
-    from dpc_mjx.devices import initialize
+    from dpc_mjx.devices import initialize  # noqa: PLC0415 (subcommand handler)
 
     initialize(args.coordinator, args.num_processes, args.process_id)
 

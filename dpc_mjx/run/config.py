@@ -4,6 +4,10 @@ The defaults are the recipe of the shipped `regular` run (docs/results.md). Hype
 overridden by dotted name (`RunConfig().replace(**{"sac.num_envs": 32})`, or
 `dpc-mjx train --set sac.num_envs=32`); the env's own options are the task config's fields
 (`env.<field>`), SAC's are `SacConfig`'s and the adapter's `AdapterConfig`'s.
+
+A run has one seed, `RunConfig.seed` (`--set seed=N`): the adapter's data and training and SAC
+use it (`adapter.seed` and `sac.seed` always equal it; setting them is an error), the DAgger round
+k collects from seed + k, and the evaluation runs the episodes of seed + 1000.
 """
 
 from __future__ import annotations
@@ -14,13 +18,14 @@ from typing import Any
 
 from dpc_mjx import adapter as adapter_lib
 from dpc_mjx import sac
-from dpc_mjx.envs.registry import get_config
+from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.registry import DEFAULT_TASK, get_config
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io.serialization import jsonable, read_json, write_json
+from dpc_mjx.serialization import jsonable, read_json, tuples, write_json
 
 CONFIG_FILE = "config.json"
 ACTOR_INITS = ("random", "oracle_regression")
-POLICY_INPUTS = tuple(sac.POLICY_INPUTS)  # 'paper': [s_body, z]; 'observer': [s_body, z, u_obs]
+_SUB_SEEDS = ("adapter.seed", "sac.seed")  # set from RunConfig.seed, never on their own
 
 
 # The SAC settings of the shipped run (docs/results.md, "DPC on the reaching task"): a longer run
@@ -93,7 +98,7 @@ class RunConfig:
     random actor with an asymmetric critic) that of `regular-paper` (`RECIPES`).
     """
 
-    task: str = "a1_arm/reaching"
+    task: str = DEFAULT_TASK
     arm: str = "regular"  # a variant name (`dpc_mjx.robots.VARIANTS`)
     env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
     samples: int = 100_000  # random-motion transitions for the adapter
@@ -104,12 +109,14 @@ class RunConfig:
     # `--set sac.num_timesteps=1000000` runs SAC with those runs' settings (TRAINED_SAC)
     sac: sac.SacConfig = dataclasses.replace(TRAINED_SAC, num_timesteps=0)
     eval_episodes: int = 64
-    eval_steps: int = 1000  # env steps of 20 ms
-    eval_controllers: tuple[str, ...] = ("mbc", "observer", "dpc", "oracle")
+    # env steps of 20 ms per evaluation episode; None: the task's episode length (reaching 1000,
+    # pushing 500: `EnvConfig.episode_length`, as `dpc-mjx eval`)
+    eval_steps: int | None = None
+    eval_controllers: tuple[str, ...] = tuple(Controller)  # mbc, observer, dpc, oracle
     # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
-    # the oracle's u over the adapter's samples, `sac.warm_start`; then SAC as usual)
+    # the oracle's u over the adapter's samples, `policy.regression`; then SAC as usual)
     actor_init: str = "oracle_regression"
-    # What the policy observes (`sac.policy.POLICY_INPUTS`): "paper" [s_body, z], or "observer"
+    # What the policy observes (`policy.policy.POLICY_INPUTS`): "paper" [s_body, z], or "observer"
     # [s_body, z, u_obs], the disturbance observer's estimate too (better with exact sensors,
     # worse with the robot's: docs/results.md, the ablation)
     policy_input: str = "paper"
@@ -117,10 +124,27 @@ class RunConfig:
     # actor, labelled with the oracle's u, added to the data before regressing again
     dagger_rounds: int = 0
     dagger_samples: int = 20_000
+    # the run's one seed; `adapter.seed` and `sac.seed` follow it (the module's docstring)
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.adapter.seed != self.seed:
+            object.__setattr__(self, "adapter", dataclasses.replace(self.adapter, seed=self.seed))
+        if self.sac.seed != self.seed:
+            object.__setattr__(self, "sac", dataclasses.replace(self.sac, seed=self.seed))
+
+    @property
+    def episode_steps(self) -> int:
+        """Env steps per evaluation episode: `eval_steps`, else the task's episode length."""
+        if self.eval_steps is not None:
+            return self.eval_steps
+        return get_config(self.task, **self.env_overrides).episode_length
 
     def validate(self) -> None:
         get_config(self.task, **self.env_overrides)  # task name and overrides
+        Controller.parse_all(self.eval_controllers)
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
+            raise DpcError(f"RunConfig.seed must be an int, got {self.seed!r}.")
         if not isinstance(self.dagger_rounds, int) or self.dagger_rounds < 0:
             raise DpcError(
                 f"RunConfig.dagger_rounds must be an int >= 0, got {self.dagger_rounds!r}."
@@ -131,7 +155,7 @@ class RunConfig:
             )
         for name in ("samples", "data_envs", "eval_episodes", "eval_steps", "dagger_samples"):
             v = getattr(self, name)
-            if not isinstance(v, int) or v < 1:
+            if (v is not None or name != "eval_steps") and (not isinstance(v, int) or v < 1):
                 raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
         self.adapter.validate()
         self.sac.validate()
@@ -166,9 +190,15 @@ class RunConfig:
 
     def replace(self, **dotted: Any) -> RunConfig:
         """A copy with overrides by dotted name: `arm='longer'`, `sac.num_envs=32`,
-        `adapter.epochs=20`, `env.push_force=(0, 60)`."""
+        `adapter.epochs=20`, `env.push_force=(0, 60)`; the seeds of the adapter and SAC
+        follow `seed` and are not options of their own."""
         top, sub = {}, {"adapter": {}, "sac": {}, "env": {}}
         for key, value in dotted.items():
+            if key in _SUB_SEEDS:
+                raise DpcError(
+                    f"{key} is the run's seed: a run has one, set `seed` instead (dpc-mjx train "
+                    f"--set seed={value}); the adapter and SAC use it."
+                )
             head, _, rest = key.partition(".")
             if rest and head in sub:
                 sub[head][rest] = value
@@ -194,10 +224,6 @@ class RunConfig:
         return out
 
 
-def tuples(d: dict) -> dict:
-    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
-
-
 def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
     """The `RunConfig` a run folder was started with."""
     path = pathlib.Path(run_dir) / CONFIG_FILE
@@ -210,7 +236,7 @@ def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None
     path = run_dir / CONFIG_FILE
     if resume:
         saved = read_json(path, "run config", hint="start the run without --resume")
-        if saved != config.to_json():
+        if saved != config.to_json() and _as_run(saved) != _as_run(config.to_json()):
             raise DpcError(
                 f"{path} holds another configuration than this run's; resume with the same "
                 "options, or start a new run folder."
@@ -218,3 +244,15 @@ def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None
     elif path.exists():
         raise DpcError(f"{run_dir} already holds a run; resume it or pick another folder.")
     write_json(path, config.to_json())
+
+
+def _as_run(saved: dict) -> dict | None:
+    """A saved config as the run it makes: read as today's `RunConfig` (sub-seeds following the
+    run's seed) with the evaluation's episode length resolved, so that a folder written by an
+    earlier version (sub-seeds of their own, `eval_steps` 1000) resumes under the same options;
+    None if `saved` is no `RunConfig`."""
+    try:
+        config = RunConfig.from_json(saved)
+        return dataclasses.replace(config, eval_steps=config.episode_steps).to_json()
+    except DpcError:
+        return None

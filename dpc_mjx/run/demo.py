@@ -5,17 +5,22 @@ MJX, with a table of DOF, masses and MJX steps/s."""
 from __future__ import annotations
 
 import dataclasses
+import datetime
+import pathlib
 import time
 
 import numpy as np
 
 from dpc_mjx import sim
 from dpc_mjx.control.state import has_fallen
+from dpc_mjx.controllers import Controller
 from dpc_mjx.robots import VARIANTS, build, resolve
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 from dpc_mjx.rotations import roll_pitch_yaw
 from dpc_mjx.run.bench import time_calls
+from dpc_mjx.run.config import RunConfig
+from dpc_mjx.run.pipeline import train_and_evaluate
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,7 +94,7 @@ DEMO = {
     "adapter.epochs": 20,
     "eval_episodes": 16,
     "eval_steps": 500,
-    "eval_controllers": ("mbc", "observer", "dpc"),
+    "eval_controllers": (Controller.MBC, Controller.OBSERVER, Controller.DPC),
 }
 QUICK = DEMO | {
     "samples": 4096,
@@ -102,12 +107,6 @@ QUICK = DEMO | {
 def run_demo(quick: bool = False, run_dir: str | None = None) -> dict:
     """Data, adapter, policy, export and evaluation of the regular arm on the reaching task with
     a small budget; prints the stages, the evaluation table and one MBC / observer / DPC line."""
-    import datetime
-    import pathlib
-
-    from dpc_mjx.run.config import RunConfig
-    from dpc_mjx.run.pipeline import train_and_evaluate
-
     config = RunConfig().replace(**(QUICK if quick else DEMO))
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     run = pathlib.Path(run_dir or f"runs/demo-{stamp}")
@@ -115,7 +114,7 @@ def run_demo(quick: bool = False, run_dir: str | None = None) -> dict:
     t0 = time.perf_counter()
     summary = train_and_evaluate(config, run)
     cells = {c["controller"]: c for c in summary["eval"]}
-    mbc, observer, dpc = cells["mbc"], cells["observer"], cells["dpc"]
+    mbc, observer, dpc = (cells[c] for c in DEMO["eval_controllers"])
     n = mbc["episodes"]
     print(
         f"\nMBC / observer / DPC ({config.arm}, {n} episodes of {mbc['steps'] * 0.02:g} s): "

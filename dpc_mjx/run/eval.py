@@ -12,9 +12,10 @@ measures (`TASK_HEADER`): RMS distance from the desired path (m) and the end eff
 tracking error (m) over the same steps, and the task's success measures at each episode's end
 (`DpcEnv.TASK_MEASURES`), each a mean with a 95% normal interval.
 
-Controllers: 'mbc' (u = 0), 'observer' (u = the momentum observer's estimate, no training, no
-force sensor), 'oracle' (u = the measured arm-mount wrench) and 'dpc' (u from the trained policy
-acting on `[s_body, z]`, z from the arm's own encoder).
+Controllers (`dpc_mjx.controllers.Controller`; plain strings work): 'mbc' (u = 0), 'observer'
+(u = the momentum observer's estimate, no training, no force sensor), 'oracle' (u = the measured
+arm-mount wrench) and 'dpc' (u from the trained policy acting on `[s_body, z]`, z from the arm's
+own encoder).
 """
 
 from __future__ import annotations
@@ -27,13 +28,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dpc_mjx.envs.registry import make
+from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.registry import DEFAULT_TASK, make, resolve_arm
 from dpc_mjx.envs.rollout import Policy, run_episodes
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.variants import Arm, arm_name
-from dpc_mjx.run.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
+from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 
-CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
+CONTROLLERS = tuple(Controller)  # mbc, observer, dpc, oracle: the tables' order
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +140,7 @@ def evaluate(
     arms: list[str | Arm],
     controllers: list[str],
     *,
-    task: str = "a1_arm/reaching",
+    task: str = DEFAULT_TASK,
     episodes: int = 64,
     steps: int | None = None,
     seed: int = 0,
@@ -151,23 +153,23 @@ def evaluate(
     (`robots.UrdfArm`, ...), its cells labelled `robots.arm_name(arm)`; `dpc_policy_for(name)`
     gives the DPC policy of an arm (its encoder + the shared actor), needed for 'dpc'; `steps`
     per episode default to the task's episode length (`EnvConfig.episode_length`)."""
-    unknown = sorted(set(controllers) - set(CONTROLLERS))
-    if unknown:
-        raise DpcError(f"Unknown controller(s) {unknown}; choose from {list(CONTROLLERS)}.")
-    if "dpc" in controllers and dpc_policy_for is None:
+    controllers = Controller.parse_all(controllers)
+    if Controller.DPC in controllers and dpc_policy_for is None:
         raise DpcError("Evaluating 'dpc' needs a trained policy: pass dpc_policy_for (or --run).")
     if episodes < 1 or (steps is not None and steps < 1):
         raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
+    for arm in arms:
+        resolve_arm(arm)  # every arm checked (the A1 holds it up) before the first compile
     results = []
     for arm in arms:
         name = arm_name(arm)
-        policy_for_arm = dpc_policy_for(name) if "dpc" in controllers else None
+        policy_for_arm = dpc_policy_for(name) if Controller.DPC in controllers else None
         for controller in controllers:
-            env_controller = "policy" if controller == "dpc" else controller
-            env = make(task, arm=arm, controller=env_controller, **(overrides or {}))
-            policy = policy_for_arm if controller == "dpc" else None
+            env = make(task, arm=arm, controller=controller, **(overrides or {}))
+            policy = policy_for_arm if controller == Controller.DPC else None
             n_steps = env.config.episode_length if steps is None else steps
-            cell = evaluate_env(env, name, controller, episodes, n_steps, seed, policy, progress)
+            label = controller.value  # the cell's controller, a plain string in tables and CSVs
+            cell = evaluate_env(env, name, label, episodes, n_steps, seed, policy, progress)
             results.append(cell)
             if on_result is not None:
                 on_result(cell)
@@ -293,7 +295,7 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
     rows = []
     for arm in dict.fromkeys(c.arm for c in cells):
         mine = {c.controller: c for c in cells if c.arm == arm}
-        first = next((k for k in ("dpc", "observer") if k in mine), None)
+        first = next((k for k in (Controller.DPC, Controller.OBSERVER) if k in mine), None)
         if first is None:
             continue
         a = mine[first]
@@ -307,11 +309,12 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
                     (b.per_episode["fell"], b.per_episode["return"]),
                 )
             )
-        if "mbc" in mine and "oracle" in mine and mine["mbc"].falls > mine["oracle"].falls:
-            gap = mine["mbc"].falls - mine["oracle"].falls
-            for name in ("dpc", "observer"):
+        mbc, oracle = mine.get(Controller.MBC), mine.get(Controller.ORACLE)
+        if mbc is not None and oracle is not None and mbc.falls > oracle.falls:
+            gap = mbc.falls - oracle.falls
+            for name in (Controller.DPC, Controller.OBSERVER):
                 if name in mine:
-                    share = (mine["mbc"].falls - mine[name].falls) / gap
+                    share = (mbc.falls - mine[name].falls) / gap
                     rows.append(
                         f"| {arm}: {name} closes {share:.0%} of the MBC-to-oracle gap "
                         "in falls | | | | | |"

@@ -27,12 +27,19 @@ import numpy as np
 from dpc_mjx import adapter as adapter_lib
 from dpc_mjx import io, sac
 from dpc_mjx.adapter import checkpoint as adapter_checkpoint
-from dpc_mjx.envs.registry import get_config, make
-from dpc_mjx.io.serialization import write_json
+from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.registry import DEFAULT_TASK, get_config, make
+from dpc_mjx.io.shipped import (  # noqa: F401 (SHIPPED, SHIPPED_PAPER: their old path)
+    SHIPPED,
+    SHIPPED_PAPER,
+    env_overrides,
+    export_cells,
+)
+from dpc_mjx.policy.regression import regress_actor
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run import plots
-from dpc_mjx.run.config import RunConfig, read_run_config, start_run, tuples
+from dpc_mjx.run.config import RunConfig, read_run_config, start_run
 from dpc_mjx.run.eval import (
     CONTROLLERS,
     PAIRED_HEADER,
@@ -45,18 +52,11 @@ from dpc_mjx.run.eval import (
     task_row,
     write_episodes_csv,
 )
-from dpc_mjx.sac import warm_start
+from dpc_mjx.serialization import write_json
 
-SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the trained run's export
-# the paper's recipe (`RECIPES["paper"]`: SAC from a random actor, no oracle label for the actor)
-SHIPPED_PAPER = SHIPPED.with_name("regular-paper")
 DATA_FILE = "data.npz"  # the adapter's samples, in the run's adapter folder
 SUMMARY_FILE = "summary.json"
 EPISODES_FILE = "eval_episodes.csv"  # the evaluation, one row per episode
-# The env options that belong to the policy rather than the task (they follow an export to any
-# task), with the values of exports written before they existed
-_POLICY_ENV_BEFORE = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
-_CHOSEN_PER_USE = ("controller", "engine")  # env options an export's env_config never imposes
 
 
 def train_and_evaluate(
@@ -104,12 +104,12 @@ def train_adapter(
     if resume and (folder / adapter_checkpoint.RECORD).exists():
         print(f"adapter: loading {folder}", flush=True)
         return adapter_checkpoint.load(folder)
-    env = make(config.task, arm=config.arm, controller="mbc", **config.env_overrides)
+    env = make(config.task, arm=config.arm, controller=Controller.MBC, **config.env_overrides)
     print(f"adapter: collecting {config.samples:,} samples ({config.arm}, MBC)", flush=True)
     data = adapter_lib.collect(
         env, config.samples, n_envs=config.data_envs, seed=config.seed, progress=progress
     )
-    cfg = dataclasses.replace(config.adapter, seed=config.seed)
+    cfg = config.adapter  # its seed is the run's (`RunConfig.seed`)
     trained = adapter_lib.train(data, cfg, progress=progress)
     data.save(folder / DATA_FILE)  # kept for the actor's warm start (and for analysis)
     adapter_checkpoint.save(folder, trained)
@@ -180,10 +180,10 @@ def train_policy(
 
 def _sac_setup(config: RunConfig, adapter: adapter_lib.Adapter):
     """The run's policy-observation env (its arm, u from the policy) and its SAC config."""
-    env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
+    env = make(config.task, arm=config.arm, controller=Controller.DPC, **config.env_overrides)
     inputs = sac.inputs_named(config.policy_input)
     latent_env = sac.LatentObsWrapper(env, adapter.config, adapter.encoder, inputs)
-    return latent_env, dataclasses.replace(config.sac, seed=config.seed)
+    return latent_env, config.sac  # its seed is the run's (`RunConfig.seed`)
 
 
 def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_config):
@@ -204,7 +204,9 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                         trainer, carry.training.policy_params, carry.training.normalizer
                     ),
                 )
-                env = make(config.task, arm=config.arm, controller="policy", **config.env_overrides)
+                env = make(
+                    config.task, arm=config.arm, controller=Controller.DPC, **config.env_overrides
+                )
                 print(
                     f"dagger {round_}/{config.dagger_rounds}: {config.dagger_samples:,} states of "
                     "the student, labelled with the oracle's u",
@@ -218,7 +220,7 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                     policy=student,
                 )
                 data = adapter_lib.Dataset.concatenate([data, own])
-            carry, report = warm_start.regress_actor(
+            carry, report = regress_actor(
                 trainer,
                 carry,
                 adapter.config,
@@ -320,26 +322,12 @@ def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = Non
     return export(config, run_dir, adapter, result, out)
 
 
-def env_overrides(artefacts: io.Artefacts, task: str | None = None) -> dict:
-    """The env options an export was trained with (its sidecar's env_config), to evaluate and
-    transfer under the same disturbances; the controller and the engine are chosen per use. On
-    another `task` than the export's, only the policy's frame and the sensor model carry over
-    (the task brings its own disturbances). An export written before `EnvConfig.u_frame` and the
-    sensor model existed acted in the world frame and was trained with exact sensors."""
-    saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
-    saved = tuples({k: v for k, v in saved.items() if k not in _CHOSEN_PER_USE})
-    trained_on = artefacts.meta.get("extra", {}).get("task", "a1_arm/reaching")
-    if task is not None and task != trained_on:
-        return {k: saved[k] for k in _POLICY_ENV_BEFORE}
-    return saved
-
-
 def transfer_arm(
     export_dir: str | pathlib.Path,
     arm: str | Arm,
     *,
     samples: int = 30_000,
-    task: str = "a1_arm/reaching",
+    task: str = DEFAULT_TASK,
     seed: int = 0,
     n_envs: int = 64,
     progress: bool = True,
@@ -353,7 +341,7 @@ def transfer_arm(
         arm = arm_argument(arm)
     name = arm_name(arm)
     artefacts = io.load(export_dir)
-    env = make(task, arm=arm, controller="mbc", **env_overrides(artefacts, task))
+    env = make(task, arm=arm, controller=Controller.MBC, **env_overrides(artefacts, task))
     print(f"transfer: collecting {samples:,} samples ({name}, MBC)", flush=True)
     data = adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress)
     config = dataclasses.replace(artefacts.adapter_config, seed=seed)
@@ -374,7 +362,7 @@ def evaluate_export(
     *,
     arms: list[str] | None = None,
     controllers: list[str] = CONTROLLERS,
-    task: str = "a1_arm/reaching",
+    task: str = DEFAULT_TASK,
     episodes: int = 64,
     steps: int | None = None,
     seed: int = 1000,
@@ -401,24 +389,3 @@ def evaluate_export(
         out=out,
         csv=csv,
     )
-
-
-def export_cells(
-    export_dir: str | pathlib.Path,
-    arms: list[str] | None,
-    controllers,
-    task: str,
-    env: dict | None = None,
-) -> tuple[io.Artefacts, list, dict]:
-    """What evaluating an export needs: its artefacts, the arms (`evaluate_export`'s rules; an
-    encoder missing for 'dpc' fails here, before any compile) and the env options (the
-    export's, then `env` over them)."""
-    artefacts = io.load(export_dir)
-    arms = [
-        artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
-        for arm in (arms or list(artefacts.meta["encoders"])[:1])
-    ]
-    if "dpc" in controllers:
-        for arm in arms:
-            artefacts.encoder(arm_name(arm))
-    return artefacts, arms, {**env_overrides(artefacts, task), **(env or {})}

@@ -10,6 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from dpc_mjx.controllers import Controller  # noqa: E402
+
 
 def _save(fig, path: str | pathlib.Path) -> pathlib.Path:
     path = pathlib.Path(path)
@@ -155,8 +157,8 @@ def sweep_heatmaps(result, out: str | pathlib.Path) -> dict[str, pathlib.Path]:
         "fall_rate": ("fall rate", [result.grid(n, "fall_rate") for n in names], names, "Reds"),
         "return": ("mean return", [result.grid(n, "mean_return") for n in names], names, "viridis"),
     }
-    if "mbc" in names and "dpc" in names:
-        diff = result.minus_mbc("dpc")[..., 0]
+    if Controller.MBC in names and Controller.DPC in names:
+        diff = result.minus_mbc(Controller.DPC)[..., 0]
         panels["dpc_minus_mbc"] = ("DPC - MBC return (paired)", [diff], ["dpc - mbc"], "RdBu")
     paths = {}
     for key, (label, grids, titles, cmap) in panels.items():

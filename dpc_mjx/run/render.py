@@ -21,11 +21,17 @@ import jax
 import mujoco
 import numpy as np
 
+from dpc_mjx import io
+from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.envs.rollout import Policy, record_episodes, zero_policy
 from dpc_mjx.errors import DpcError
+from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.robots import a1
 from dpc_mjx.robots.arms import EE_SITE
 from dpc_mjx.robots.assemble import arm_prefix
+from dpc_mjx.robots.spec_json import arm_argument
+from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.rotations import roll_pitch_yaw
 
 BACKENDS = {  # MUJOCO_GL value -> what to install when it is missing
@@ -157,7 +163,7 @@ def write_video(frames: np.ndarray, path: str | pathlib.Path, fps: int = FPS) ->
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".gif":
-        from PIL import Image
+        from PIL import Image  # noqa: PLC0415 (optional: Pillow, only for GIFs)
 
         step = max(1, round(fps / GIF_FPS))
         images = [Image.fromarray(f) for f in frames[::step]]
@@ -166,7 +172,7 @@ def write_video(frames: np.ndarray, path: str | pathlib.Path, fps: int = FPS) ->
         )
     elif path.suffix.lower() == ".mp4":
         try:
-            import imageio_ffmpeg
+            import imageio_ffmpeg  # noqa: PLC0415 (optional dependency: the render extra)
         except ImportError as e:
             raise DpcError(
                 "Writing MP4 needs imageio-ffmpeg: `pip install -e .[render]` (make install does)."
@@ -187,9 +193,9 @@ def write_video(frames: np.ndarray, path: str | pathlib.Path, fps: int = FPS) ->
 def render_rollout(
     out: str | pathlib.Path,
     *,
-    task: str = "a1_arm/reaching",
+    task: str = DEFAULT_TASK,
     arm: str = "regular",
-    controllers: tuple[str, ...] = ("mbc",),
+    controllers: tuple[str, ...] = (Controller.MBC,),
     export: str | pathlib.Path | None = None,
     seconds: float = 2.0,
     seed: int = 0,
@@ -204,29 +210,18 @@ def render_rollout(
     `out` (.mp4 or .gif). Every controller runs under the export's env options (its policy frame
     and sensor model; its disturbances on the task it was trained on), as `dpc-mjx eval` does.
     Returns the env step of each controller's fall (None if it did not fall)."""
-    from dpc_mjx import io
-    from dpc_mjx.envs.registry import make
-    from dpc_mjx.robots.spec_json import arm_argument
-    from dpc_mjx.robots.variants import arm_name
-    from dpc_mjx.run.eval import CONTROLLERS
-    from dpc_mjx.run.pipeline import SHIPPED, env_overrides
-
-    unknown = sorted(set(controllers) - set(CONTROLLERS))
-    if unknown or not controllers:
-        raise DpcError(f"Render which controllers? Got {list(controllers)}; use {CONTROLLERS}.")
+    if not controllers:
+        raise DpcError(f"Render which controllers? Got none; use {[c.value for c in Controller]}.")
+    controllers = [c.value for c in Controller.parse_all(controllers)]  # plain names, labels
     if pathlib.Path(out).suffix.lower() not in (".mp4", ".gif"):
         raise DpcError(f"{out}: write videos as .mp4 or .gif.")
     art = io.load(export or SHIPPED)
     arm_spec = arm_argument(arm) if isinstance(arm, str) else arm
     columns, falls, renderer = [], {}, None
     for controller in controllers:
-        env = make(
-            task,
-            arm=arm_spec,
-            controller="policy" if controller == "dpc" else controller,
-            **env_overrides(art, task),
-        )
-        policy = art.dpc_policy(arm_name(arm_spec)) if controller == "dpc" else zero_policy
+        env = make(task, arm=arm_spec, controller=controller, **env_overrides(art, task))
+        dpc = controller == Controller.DPC
+        policy = art.dpc_policy(arm_name(arm_spec)) if dpc else zero_policy
         print(f"render: {controller}, {seconds} s of episode {episode} (seed {seed})", flush=True)
         qpos, pushes, done = record_episode(env, seconds, seed, episode, policy, episodes)
         fell = int(np.argmax(done)) if done.any() else None

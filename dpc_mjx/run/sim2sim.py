@@ -15,7 +15,9 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 
+from dpc_mjx.envs.registry import DEFAULT_TASK
 from dpc_mjx.errors import DpcError
+from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.physics import ENGINES
 from dpc_mjx.run.eval import (
     CONTROLLERS,
@@ -26,7 +28,6 @@ from dpc_mjx.run.eval import (
     paired_rows,
     write_episodes_csv,
 )
-from dpc_mjx.run.pipeline import SHIPPED, export_cells
 
 HEADER = (
     "| arm | controller | engine | fall rate [95% CI] | mean return [95% CI] | roll RMS (rad) "
@@ -69,7 +70,7 @@ def sim2sim(
     *,
     arms: list[str] | None = None,
     controllers: list[str] = CONTROLLERS,
-    task: str = "a1_arm/reaching",
+    task: str = DEFAULT_TASK,
     episodes: int = 64,
     steps: int | None = None,
     seed: int = 1000,

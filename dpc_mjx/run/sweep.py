@@ -24,14 +24,17 @@ import time
 
 import numpy as np
 
+from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.model_batch import ModelBatchEnv
-from dpc_mjx.envs.registry import make
+from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.envs.rollout import run_episodes
 from dpc_mjx.errors import DpcError
+from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.robots.params import batch_arm_params
 from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.run.eval import CONTROLLERS, CellResult, cell_result, write_episodes_csv
-from dpc_mjx.run.stats import paired_diff_ci
+from dpc_mjx.run.plots import sweep_heatmaps
+from dpc_mjx.stats import paired_diff_ci
 
 # One row per (grid point, controller) of the sweep's CSV; `*_minus_mbc` are paired differences
 # with MBC on the same episodes (empty for MBC itself, or without MBC in the sweep).
@@ -81,7 +84,7 @@ class SweepResult:
         """(n, m, 3) the paired return difference `controller` - MBC per grid point (mean,
         95% low, high)."""
         shape = (len(self.upper_arm), len(self.gripper_mass), 3)
-        pairs = zip(self.cells[controller], self.cells["mbc"])
+        pairs = zip(self.cells[controller], self.cells[Controller.MBC])
         diffs = [paired_diff_ci(a.per_episode["return"], b.per_episode["return"]) for a, b in pairs]
         return np.array(diffs).reshape(shape)
 
@@ -109,13 +112,11 @@ class SweepResult:
         return out
 
     def _paired(self, controller: str) -> bool:
-        return controller != "mbc" and "mbc" in self.cells
+        return controller != Controller.MBC and Controller.MBC in self.cells
 
     def write(self, out: str | pathlib.Path) -> dict[str, pathlib.Path]:
         """The table (sweep.csv), every episode (sweep_episodes.csv) and the heatmaps
         (`plots.sweep_heatmaps`) into the folder `out`; the paths by name."""
-        from dpc_mjx.run.plots import sweep_heatmaps
-
         out = pathlib.Path(out)
         out.mkdir(parents=True, exist_ok=True)
         with (out / "sweep.csv").open("w", newline="") as f:
@@ -136,7 +137,7 @@ def sweep(
     upper_arm: str | tuple = (0.10, 0.30, 8),
     gripper_mass: str | tuple = (0.1, 0.6, 8),
     controllers: list[str] | tuple[str, ...] = CONTROLLERS,
-    task: str = "a1_arm/reaching",
+    task: str = DEFAULT_TASK,
     episodes: int = 16,
     steps: int | None = None,
     seed: int = 1000,
@@ -149,12 +150,8 @@ def sweep(
     shipped one), each grid point `episodes` episodes of `steps` env steps from `seed`, env
     options `env` over the export's. Writes the table, episodes and heatmaps into `out` if
     given, prints the table's summary, returns the `SweepResult`."""
-    from dpc_mjx.run.pipeline import SHIPPED, export_cells
-
     uppers, masses = grid_values(upper_arm), grid_values(gripper_mass)
-    unknown = sorted(set(controllers) - set(CONTROLLERS))
-    if unknown:
-        raise DpcError(f"Unknown controller(s) {unknown}; choose from {list(CONTROLLERS)}.")
+    controllers = [c.value for c in Controller.parse_all(controllers)]  # plain names, labels
     if episodes < 1 or (steps is not None and steps < 1):
         raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
     artefacts, (arm,), overrides = export_cells(export or SHIPPED, None, controllers, task, env)
@@ -165,9 +162,7 @@ def sweep(
     cells, seconds = {}, {}
     for controller in controllers:
         t0 = time.perf_counter()
-        base = make(
-            task, arm=arm, controller="policy" if controller == "dpc" else controller, **overrides
-        )
+        base = make(task, arm=arm, controller=controller, **overrides)
         mx, in_axes = batch_arm_params(
             base.mx,
             base.model,
@@ -175,7 +170,8 @@ def sweep(
             gripper_mass=np.repeat(gm, episodes),
         )
         n_steps = base.config.episode_length if steps is None else steps
-        kw = {"policy": artefacts.dpc_policy(arm_name(arm))} if controller == "dpc" else {}
+        dpc = controller == Controller.DPC
+        kw = {"policy": artefacts.dpc_policy(arm_name(arm))} if dpc else {}
         r = run_episodes(
             ModelBatchEnv(base, mx, in_axes),
             points * episodes,

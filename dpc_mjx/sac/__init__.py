@@ -6,21 +6,23 @@ acting through u = [f_a, tau_a].
     networks.py    brax's SAC actor and twin critics at the paper's sizes
     config.py      `SacConfig`: the hyperparameters (brax's SAC's, and those of our loop)
     trainer.py     `make_trainer`: the jitted pieces, brax's SAC in our epoch, the evaluation
+    state.py       `Carry`: what an epoch hands to the next (learning state, buffer, best policy)
     train.py       `train`, `restore_policy`: our host loop (log, checkpoint, resume, best policy)
     log.py         the CSV log, one row per epoch
     checkpoint.py  the full training state on disk, for resuming
-    warm_start.py  beyond the paper: the actor regressed on the oracle's u before SAC
-    policy.py      `PolicyState`, `POLICY_INPUTS`, `act`, `dpc_policy`: a trained policy as data
+
+The trained policy as data (`PolicyState`, `dpc_policy`) and the oracle regression that starts it
+are `dpc_mjx.policy` (`sac.policy` and `sac.warm_start` re-export them).
 
 env = LatentObsWrapper(make("a1_arm/reaching", arm="regular"), adapter.config, adapter.encoder)
 result = train(env, SacConfig(num_timesteps=500_000), run_dir="runs/dpc")
 policy = dpc_policy(adapter.config, adapter.encoder, result.policy)   # raw obs -> action
 """
 
+from dpc_mjx.policy.policy import POLICY_INPUTS, PolicyState, act, dpc_policy, inputs_named
 from dpc_mjx.sac.config import SacConfig
 from dpc_mjx.sac.env import LatentObsWrapper, PrivilegedCriticWrapper
 from dpc_mjx.sac.networks import HIDDEN, make_networks
-from dpc_mjx.sac.policy import POLICY_INPUTS, PolicyState, act, dpc_policy, inputs_named
 from dpc_mjx.sac.train import TrainResult, policy_state, restore_policy, train
 from dpc_mjx.sac.trainer import make_trainer
 

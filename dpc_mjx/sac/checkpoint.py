@@ -26,9 +26,9 @@ import datetime
 import pathlib
 from typing import Any
 
+from dpc_mjx import serialization as ser
 from dpc_mjx._version import __version__
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import serialization as ser
 
 FORMAT_VERSION = 1  # of the checkpoint pair
 MSGPACK = "checkpoint.msgpack"

@@ -54,7 +54,7 @@ class SacConfig:
     eval_every: int = 2
     eval_envs: int = 32
     keep_best: bool = True
-    seed: int = 0
+    seed: int = 0  # the networks' initialisation and exploration; in a run, `RunConfig.seed`
 
     def validate(self) -> None:
         for name in ("eval_every", "actor_warmup_steps", "num_timesteps"):

@@ -2,7 +2,7 @@
 
 `LatentObsWrapper` wraps one unbatched `DpcEnv` (batch it afterwards with `wrap_for_training`):
 it replaces the env's observation `[s_body, s_arm, p_arm, u_obs]` by the policy's (`inputs`, see
-`sac.policy`): `[s_body (11), z (latent_size)]` (the paper's) or `[s_body, z, u_obs (6)]`, z
+`dpc_mjx.policy`): `[s_body (11), z (latent_size)]` (the paper's) or `[s_body, z, u_obs (6)]`, z
 computed inside `reset`/`step` by a frozen encoder (`adapter.encode`), so the policy never sees
 the arm's joints: the same policy serves any arm that has an encoder.
 
@@ -23,8 +23,8 @@ from dpc_mjx.adapter.networks import AdapterConfig, EncoderState
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.observations import PRIVILEGED, PRIVILEGED_SIZE
 from dpc_mjx.errors import DpcError
+from dpc_mjx.policy.policy import PAPER_INPUTS, observation_size, policy_observation
 from dpc_mjx.rotations import roll_pitch_yaw, rot_z, wrench_to_yaw_frame
-from dpc_mjx.sac.policy import PAPER_INPUTS, observation_size, policy_observation
 
 
 class LatentObsWrapper(Wrapper):

@@ -12,11 +12,9 @@ from __future__ import annotations
 
 import csv
 import pathlib
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from dpc_mjx.sac.config import SacConfig
-    from dpc_mjx.sac.trainer import Carry
+from dpc_mjx.sac.config import SacConfig
+from dpc_mjx.sac.trainer import Carry
 
 LOG_FILE = "sac_log.csv"
 

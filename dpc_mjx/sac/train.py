@@ -34,10 +34,10 @@ from brax.envs.base import Env
 
 from dpc_mjx.adapter.networks import Normalizer
 from dpc_mjx.errors import DpcError
+from dpc_mjx.policy.policy import PolicyState
 from dpc_mjx.progress import bar
 from dpc_mjx.sac import checkpoint, log
 from dpc_mjx.sac.config import SacConfig
-from dpc_mjx.sac.policy import PolicyState
 from dpc_mjx.sac.trainer import BestPolicy, Carry, Trainer, TrainingState, make_trainer
 
 
@@ -91,12 +91,7 @@ def train(
     if config.eval_every and start_epoch < total:
         baseline = zero_action_baseline(trainer, carry, eval_key)
         if start_epoch == 0:  # the starting policy, a candidate for the best like any other
-            row = log.empty_row() | {"epoch": 0, "env_steps": 0, "grad_steps": 0, "episodes": 0}
-            carry = _evaluate(trainer, carry, row, eval_key)
-            row.update({f"eval_mbc_{k}": v for k, v in baseline.items()})
-            history.append(row)
-            if run_dir is not None:
-                log.append(run_dir, row)
+            carry = _evaluate_start(trainer, carry, eval_key, baseline, history, run_dir)
     t0 = time.perf_counter()
     with bar(total * config.env_steps_per_epoch, "sac", "step", progress and total > 0) as pb:
         pb.update(start_epoch * config.env_steps_per_epoch)
@@ -183,6 +178,17 @@ def _evaluate(trainer: Trainer, carry: Carry, row: dict, key: jax.Array) -> Carr
     row.update(eval_return=float(scores["return"]), eval_fall_rate=float(scores["fall_rate"]))
     if row["eval_return"] > float(carry.best.score):
         carry = carry.replace(best=_best(carry, row["eval_return"]))
+    return carry
+
+
+def _evaluate_start(trainer, carry, key, baseline: dict, history: list, run_dir) -> Carry:
+    """The starting policy scored as epoch 0: its row appended to `history` (and the log)."""
+    row = log.empty_row() | {"epoch": 0, "env_steps": 0, "grad_steps": 0, "episodes": 0}
+    carry = _evaluate(trainer, carry, row, key)
+    row.update({f"eval_mbc_{k}": v for k, v in baseline.items()})
+    history.append(row)
+    if run_dir is not None:
+        log.append(run_dir, row)
     return carry
 
 

@@ -15,8 +15,8 @@ each device steps its envs (`devices.constrain` on the env state after every ste
 the replay buffer and the gradient steps are replicated (the transitions gathered into the
 buffer). `num_envs` must be a multiple of the device count; the evaluation pads `eval_envs`.
 
-What an epoch carries (`Carry`) is a `flax.struct.dataclass` pytree: it crosses `jax.jit`, and a
-checkpoint (`sac.checkpoint`) holds all of it. The host loop around these pieces is `sac.train`.
+What an epoch carries (`Carry`, a pytree that a checkpoint holds) is `sac.state`'s. The host loop
+around these pieces is `sac.train`.
 """
 
 from __future__ import annotations
@@ -33,55 +33,15 @@ from brax.training.acme import running_statistics
 from brax.training.agents.sac import losses as sac_losses
 from brax.training.agents.sac import networks as sac_networks
 from brax.training.types import Transition
-from flax import struct
 
 from dpc_mjx import devices
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.wrappers import wrap_for_training
+from dpc_mjx.policy.policy import PAPER_INPUTS
 from dpc_mjx.sac.config import SacConfig
 from dpc_mjx.sac.env import PrivilegedCriticWrapper
 from dpc_mjx.sac.networks import make_networks
-from dpc_mjx.sac.policy import PAPER_INPUTS
-
-
-@struct.dataclass
-class TrainingState:
-    """Everything that learns, and the counters."""
-
-    policy_params: dict
-    policy_opt: optax.OptState
-    q_params: dict
-    q_opt: optax.OptState
-    target_q_params: dict
-    log_alpha: jax.Array  # () log of the entropy temperature
-    alpha_opt: optax.OptState
-    normalizer: running_statistics.RunningStatisticsState  # over the observation
-    env_steps: jax.Array  # () env steps so far
-    grad_steps: jax.Array  # () gradient steps so far
-
-
-@struct.dataclass
-class BestPolicy:
-    """The best policy the periodic evaluations have seen."""
-
-    policy_params: dict
-    normalizer: running_statistics.RunningStatisticsState
-    score: jax.Array  # () mean evaluation return (NO_SCORE before the first evaluation)
-    epoch: jax.Array  # () epochs trained before it was evaluated (-1: none yet; 0: the start)
-
-
-NO_SCORE = -1e9  # finite on purpose: every array of a checkpoint stays finite
-
-
-@struct.dataclass
-class Carry:
-    """What one epoch hands to the next; a checkpoint holds all of it but `env_state`."""
-
-    training: TrainingState
-    buffer: replay_buffers.ReplayBufferState
-    key: jax.Array
-    epoch: jax.Array  # () epochs done
-    best: BestPolicy
+from dpc_mjx.sac.state import NO_SCORE, BestPolicy, Carry, TrainingState
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +52,7 @@ class Trainer:
     observation_size: int  # the actor's (policy) observation
     critic_observation_size: int  # what the replay buffer and the critics hold (>= the actor's)
     action_size: int
-    policy_inputs: tuple[str, ...]  # the blocks of the observation (`sac.policy.POLICY_INPUTS`)
+    policy_inputs: tuple[str, ...]  # the blocks of the observation (`policy.policy.POLICY_INPUTS`)
     networks: sac_networks.SACNetworks
     policy_optimizer: optax.GradientTransformation
     init: Callable  # key -> Carry
@@ -114,16 +74,28 @@ class Trainer:
         return self._compiled[name]
 
 
-def make_trainer(env, config: SacConfig) -> Trainer:
-    """Build the SAC run on `env` (one unbatched env, e.g. a `LatentObsWrapper`; with
-    `config.critic_privileged`, the trainer extends its observation with the privileged values
-    for the critics, `PrivilegedCriticWrapper`)."""
-    config.validate()
-    mesh = devices.mesh(local=True)  # SAC trains within one process, on its own devices
-    devices.check_divisible(config.num_envs, "sac.num_envs", mesh)
-    policy_obs_size = env.observation_size  # the actor's input
-    if config.critic_privileged:  # the privileged values come from the DpcEnv inside
-        env = PrivilegedCriticWrapper(env)
+@dataclasses.dataclass(frozen=True)
+class _Parts:
+    """What the jitted pieces of one run close over, built once by `make_trainer`."""
+
+    config: SacConfig
+    mesh: jax.sharding.Mesh
+    env: object  # the unbatched env (with the critics' privileged values when asked)
+    batched: object  # `env` behind the training wrappers (auto-reset, episode limit)
+    obs_size: int  # what the replay buffer and the critics hold
+    action_size: int
+    nets: sac_networks.SACNetworks
+    make_policy: Callable  # (normalizer, policy params), deterministic -> policy
+    losses: tuple[Callable, Callable, Callable]  # brax's alpha, critic and actor losses
+    policy_opt: optax.GradientTransformation
+    q_opt: optax.GradientTransformation
+    alpha_opt: optax.GradientTransformation
+    buffer: replay_buffers.UniformSamplingQueue
+
+
+def _parts(env, config: SacConfig, mesh, policy_obs_size: int) -> _Parts:
+    """The networks, losses, optimizers and replay buffer of a run on `env` (its actor seeing
+    the first `policy_obs_size` values of the observation)."""
     batched = wrap_for_training(env)
     obs_size, action_size = env.observation_size, env.action_size  # obs_size: what is stored
     nets = make_networks(
@@ -134,9 +106,7 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         critic_extra=obs_size - policy_obs_size,
     )
     make_policy = sac_networks.make_inference_fn(nets)
-    alpha_loss, critic_loss, actor_loss = sac_losses.make_losses(
-        nets, config.reward_scaling, config.discounting, action_size
-    )
+    losses = sac_losses.make_losses(nets, config.reward_scaling, config.discounting, action_size)
     policy_opt = optax.adam(config.actor_learning_rate or config.learning_rate)
     q_opt = optax.adam(config.learning_rate)
     alpha_opt = optax.adam(3e-4)  # brax's choice
@@ -153,21 +123,68 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         ),
         sample_batch_size=config.batch_size * config.grad_updates_per_step,
     )
+    return _Parts(
+        config=config,
+        mesh=mesh,
+        env=env,
+        batched=batched,
+        obs_size=obs_size,
+        action_size=action_size,
+        nets=nets,
+        make_policy=make_policy,
+        losses=tuple(losses),
+        policy_opt=policy_opt,
+        q_opt=q_opt,
+        alpha_opt=alpha_opt,
+        buffer=buffer,
+    )
+
+
+def make_trainer(env, config: SacConfig) -> Trainer:
+    """Build the SAC run on `env` (one unbatched env, e.g. a `LatentObsWrapper`; with
+    `config.critic_privileged`, the trainer extends its observation with the privileged values
+    for the critics, `PrivilegedCriticWrapper`)."""
+    config.validate()
+    mesh = devices.mesh(local=True)  # SAC trains within one process, on its own devices
+    devices.check_divisible(config.num_envs, "sac.num_envs", mesh)
+    policy_obs_size = env.observation_size  # the actor's input
+    if config.critic_privileged:  # the privileged values come from the DpcEnv inside
+        env = PrivilegedCriticWrapper(env)
+    p = _parts(env, config, mesh, policy_obs_size)
+    return Trainer(
+        config=config,
+        observation_size=policy_obs_size,
+        critic_observation_size=p.obs_size,
+        policy_inputs=tuple(getattr(env, "policy_inputs", PAPER_INPUTS)),
+        action_size=p.action_size,
+        networks=p.nets,
+        policy_optimizer=p.policy_opt,
+        init=jax.jit(_init_fn(p)),
+        reset=jax.jit(_reset_fn(p)),
+        epoch=jax.jit(_epoch_fn(p), donate_argnums=(0, 1)),
+        evaluate=jax.jit(_evaluate_fn(p)),
+    )
+
+
+def _init_fn(p: _Parts) -> Callable:
+    """key -> Carry: the networks at their random start, empty buffer, no best policy yet."""
 
     def init(key: jax.Array) -> Carry:
         k_pi, k_q, k_buf, key = jax.random.split(key, 4)
-        policy_params = nets.policy_network.init(k_pi)
-        q_params = nets.q_network.init(k_q)
-        log_alpha = jp.log(jp.asarray(config.init_alpha, jp.float32))
+        policy_params = p.nets.policy_network.init(k_pi)
+        q_params = p.nets.q_network.init(k_q)
+        log_alpha = jp.log(jp.asarray(p.config.init_alpha, jp.float32))
         training = TrainingState(
             policy_params=policy_params,
-            policy_opt=policy_opt.init(policy_params),
+            policy_opt=p.policy_opt.init(policy_params),
             q_params=q_params,
-            q_opt=q_opt.init(q_params),
+            q_opt=p.q_opt.init(q_params),
             target_q_params=q_params,
             log_alpha=log_alpha,
-            alpha_opt=alpha_opt.init(log_alpha),
-            normalizer=running_statistics.init_state(jax.ShapeDtypeStruct((obs_size,), jp.float32)),
+            alpha_opt=p.alpha_opt.init(log_alpha),
+            normalizer=running_statistics.init_state(
+                jax.ShapeDtypeStruct((p.obs_size,), jp.float32)
+            ),
             env_steps=jp.zeros((), jp.int32),
             grad_steps=jp.zeros((), jp.int32),
         )
@@ -177,23 +194,26 @@ def make_trainer(env, config: SacConfig) -> Trainer:
             jp.asarray(NO_SCORE, jp.float32),
             jp.full((), -1, jp.int32),
         )
-        return Carry(training, buffer.init(k_buf), key, jp.zeros((), jp.int32), best)
+        return Carry(training, p.buffer.init(k_buf), key, jp.zeros((), jp.int32), best)
+
+    return init
+
+
+def _reset_fn(p: _Parts) -> Callable:
+    """key -> the batched env state, each env on its device."""
 
     def reset(key: jax.Array):
-        state = batched.reset(jax.random.split(key, config.num_envs))
-        return devices.constrain(state, config.num_envs, mesh)
+        state = p.batched.reset(jax.random.split(key, p.config.num_envs))
+        return devices.constrain(state, p.config.num_envs, p.mesh)
 
-    def experience(ts: TrainingState, env_state, buf, key):
-        policy = make_policy((ts.normalizer, ts.policy_params))
-        env_state, tr = acting.actor_step(
-            batched, env_state, policy, key, extra_fields=("truncation",)
-        )
-        env_state = devices.constrain(env_state, config.num_envs, mesh)  # each env on its device
-        normalizer = ts.normalizer
-        if config.normalize_observations:
-            normalizer = running_statistics.update(normalizer, tr.observation)
-        ts = ts.replace(normalizer=normalizer, env_steps=ts.env_steps + config.num_envs)
-        return ts, env_state, buffer.insert(buf, tr)
+    return reset
+
+
+def _sgd_step_fn(p: _Parts) -> Callable:
+    """((TrainingState, key), transitions) -> ((TrainingState, key), losses): one gradient step
+    of the temperature, the critics, the actor and the target critics (brax's `sgd_step`)."""
+    alpha_loss, critic_loss, actor_loss = p.losses
+    config, policy_opt, q_opt, alpha_opt = p.config, p.policy_opt, p.q_opt, p.alpha_opt
 
     def sgd_step(carry, transitions):
         ts, key = carry
@@ -244,17 +264,38 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         losses = {"critic_loss": c_loss, "actor_loss": p_loss, "alpha_loss": a_loss}
         return (ts, key), losses | {"alpha": jp.exp(log_alpha)}
 
-    def episode_stats(env_state) -> dict[str, jax.Array]:
-        """Sums over the envs whose episode ended at this step."""
-        done = env_state.info["episode_done"]
-        em = env_state.info["episode_metrics"]
-        return {
-            "episodes": jp.sum(done),
-            "return_sum": jp.sum(done * em["sum_reward"]),
-            "falls": jp.sum(done * em["fall"]),
-            "nan_resets": jp.sum(done * em["nan_resets"]),
-            "length_sum": jp.sum(done * em["length"]),
-        }
+    return sgd_step
+
+
+def _episode_stats(env_state) -> dict[str, jax.Array]:
+    """Sums over the envs whose episode ended at this step."""
+    done = env_state.info["episode_done"]
+    em = env_state.info["episode_metrics"]
+    return {
+        "episodes": jp.sum(done),
+        "return_sum": jp.sum(done * em["sum_reward"]),
+        "falls": jp.sum(done * em["fall"]),
+        "nan_resets": jp.sum(done * em["nan_resets"]),
+        "length_sum": jp.sum(done * em["length"]),
+    }
+
+
+def _training_step_fn(p: _Parts) -> Callable:
+    """((Carry, env_state), _) -> ((Carry, env_state), stats): one actor step of every env, then
+    `grad_updates_per_step` gradient steps once the buffer holds enough transitions."""
+    config, buffer, sgd_step = p.config, p.buffer, _sgd_step_fn(p)
+
+    def experience(ts: TrainingState, env_state, buf, key):
+        policy = p.make_policy((ts.normalizer, ts.policy_params))
+        env_state, tr = acting.actor_step(
+            p.batched, env_state, policy, key, extra_fields=("truncation",)
+        )
+        env_state = devices.constrain(env_state, config.num_envs, p.mesh)  # each env on its device
+        normalizer = ts.normalizer
+        if config.normalize_observations:
+            normalizer = running_statistics.update(normalizer, tr.observation)
+        ts = ts.replace(normalizer=normalizer, env_steps=ts.env_steps + config.num_envs)
+        return ts, env_state, buffer.insert(buf, tr)
 
     def learn(ts, buf, key):
         buf, transitions = buffer.sample(buf)
@@ -277,12 +318,20 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         ready = buffer.size(buf) >= max(config.min_replay_size, config.batch_size)
         ts, buf, losses = jax.lax.cond(ready, learn, skip, ts, buf, k_sgd)
         c = c.replace(training=ts, buffer=buf, key=key)
-        stats = episode_stats(env_state) | losses | {"learning": ready.astype(jp.float32)}
+        stats = _episode_stats(env_state) | losses | {"learning": ready.astype(jp.float32)}
         return (c, env_state), stats
+
+    return training_step
+
+
+def _epoch_fn(p: _Parts) -> Callable:
+    """(Carry, env_state) -> (Carry, env_state, metrics): `actor_steps_per_epoch` training steps
+    in one `lax.scan`; metrics: episode sums, losses averaged over the steps that learned."""
+    training_step = _training_step_fn(p)
 
     def epoch(c: Carry, env_state):
         (c, env_state), stats = jax.lax.scan(
-            training_step, (c, env_state), None, length=config.actor_steps_per_epoch
+            training_step, (c, env_state), None, length=p.config.actor_steps_per_epoch
         )
         sums = ("episodes", "return_sum", "falls", "nan_resets", "length_sum")
         learning = jp.maximum(jp.sum(stats["learning"]), 1.0)
@@ -293,12 +342,18 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         }
         return c.replace(epoch=c.epoch + 1), env_state, metrics
 
+    return epoch
+
+
+def _evaluate_fn(p: _Parts) -> Callable:
+    """(TrainingState, key, gate) -> {'return', 'fall_rate'} (see `Trainer.evaluate`)."""
+    env, config, mesh = p.env, p.config, p.mesh
     eval_steps = env.unwrapped.config.episode_length
 
     def evaluate(ts: TrainingState, key: jax.Array, gate: jax.Array) -> dict[str, jax.Array]:
         """`eval_envs` episodes of the deterministic policy (actions x `gate`), ended at their
         first done."""
-        policy = make_policy((ts.normalizer, ts.policy_params), deterministic=True)
+        policy = p.make_policy((ts.normalizer, ts.policy_params), deterministic=True)
         n, size = config.eval_envs, devices.padded(config.eval_envs, mesh)  # copies past n
         keys = devices.pad(jax.random.split(key, n), size)
         state = devices.constrain(jax.vmap(env.reset)(keys), size, mesh)
@@ -314,19 +369,7 @@ def make_trainer(env, config: SacConfig) -> Trainer:
         (_, tally), _ = rollout.scan_steps(step, act, carry, keys)
         return {"return": jp.mean(tally.ret[:n]), "fall_rate": jp.mean(tally.fell[:n])}
 
-    return Trainer(
-        config=config,
-        observation_size=policy_obs_size,
-        critic_observation_size=obs_size,
-        policy_inputs=tuple(getattr(env, "policy_inputs", PAPER_INPUTS)),
-        action_size=action_size,
-        networks=nets,
-        policy_optimizer=policy_opt,
-        init=jax.jit(init),
-        reset=jax.jit(reset),
-        epoch=jax.jit(epoch, donate_argnums=(0, 1)),
-        evaluate=jax.jit(evaluate),
-    )
+    return evaluate
 
 
 __all__ = ["NO_SCORE", "BestPolicy", "Carry", "Trainer", "TrainingState", "make_trainer"]

@@ -15,6 +15,9 @@ All in the world frame (z up; N, m, N·m)::
 One linear programme per configuration minimises s, the share of the motors' torque the stance
 needs; the arm passes when every configuration is feasible with s <= 1. This is a necessary
 condition (standing still); walking and pushes need margin on top of it.
+
+`require_static_balance(robot)` refuses a robot whose arm files fail (the named and parametric
+arms pass); `envs.registry.resolve_arm` calls it wherever an arm comes in, before any compile.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import pathlib
 
 import jax.numpy as jp
 import mujoco
@@ -30,6 +34,10 @@ from scipy.optimize import linprog
 
 from dpc_mjx.control.balance import GRAVITY, default_params, friction_constraints
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots.arms import UrdfArm
+from dpc_mjx.robots.assemble import assemble
+from dpc_mjx.robots.layout import layout
+from dpc_mjx.robots.variants import RobotSpec
 
 SAMPLES = 64  # random arm configurations besides the home pose
 
@@ -47,9 +55,6 @@ class StaticBalance:
 
 def static_balance(robot) -> StaticBalance:
     """Check a robot (anything `robots.resolve` takes; its files read but no MJX compile)."""
-    from dpc_mjx.robots.assemble import assemble  # noqa: PLC0415 (assemble imports variants)
-    from dpc_mjx.robots.layout import layout  # noqa: PLC0415
-
     model = assemble(robot).compile()
     lay = layout(model)
     data = mujoco.MjData(model)
@@ -76,10 +81,18 @@ def static_balance(robot) -> StaticBalance:
     )
 
 
+def require_static_balance(robot: RobotSpec) -> None:
+    """`DpcError` unless the A1 can stand with `robot`'s arms anywhere in their reach, checked
+    where an arm is a file (`UrdfArm.is_file`: your URDF/MJCF; the named arms pass)."""
+    files = [arm for arm in robot.arms if isinstance(arm, UrdfArm) and arm.is_file]
+    if files:
+        _require(robot, tuple(pathlib.Path(arm.urdf).stat().st_mtime_ns for arm in files))
+
+
 @functools.lru_cache(maxsize=32)
-def require_static_balance(robot, _file_stamps: tuple = ()) -> None:
-    """`DpcError` unless the A1 can stand with `robot`'s arms anywhere in their reach (cached per
-    robot and the arm files' modification times, `_file_stamps`)."""
+def _require(robot: RobotSpec, _file_stamps: tuple = ()) -> None:
+    """`require_static_balance`, cached per robot and the arm files' modification times
+    (`_file_stamps`)."""
     report = static_balance(robot)
     if report.feasible:
         return

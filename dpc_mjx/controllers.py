@@ -1,0 +1,55 @@
+"""The controllers the library compares, one name each: `Controller`, a `StrEnum`.
+
+Each picks the u (the arm's wrench on the A1, [f (N), tau (N·m)] about its COM) that the
+low-level controller compensates for (`DpcEnv.controller_u`, `run.eval`, `deploy`, the CLI):
+
+    mbc       u = 0: the model-based controller alone
+    observer  u = the momentum observer's estimate (`control/observer.py`; no training, no sensor)
+    dpc       u from the trained policy acting on [s_body, z] (the env's action, scaled)
+    oracle    u = the measured arm-mount wrench (simulation only: no robot has the sensor)
+
+Members are strings (`Controller.DPC == "dpc"`), so plain strings work wherever a controller is
+asked for; `Controller.parse` (and `Controller(...)`) also takes 'policy', the env's name for
+'dpc' before this enum existed (the `env_config.controller` of exports written before it).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable
+
+from dpc_mjx.errors import DpcError
+
+
+class Controller(enum.StrEnum):
+    """A controller by name; iteration order is the tables' (MBC, observer, DPC, oracle)."""
+
+    MBC = "mbc"
+    OBSERVER = "observer"
+    DPC = "dpc"
+    ORACLE = "oracle"
+
+    @classmethod
+    def _missing_(cls, value: object) -> Controller | None:
+        return ALIASES.get(value) if isinstance(value, str) else None
+
+    @classmethod
+    def parse(cls, value: str | Controller) -> Controller:
+        """The member named `value` (a member, its string, or an alias in `ALIASES`); a
+        `DpcError` naming the valid names otherwise."""
+        try:
+            return cls(value)
+        except ValueError:
+            raise DpcError(
+                f"Unknown controller {value!r}; choose one of {[c.value for c in cls]} "
+                f"(or {sorted(ALIASES)} for 'dpc')."
+            ) from None
+
+    @classmethod
+    def parse_all(cls, values: Iterable[str | Controller]) -> tuple[Controller, ...]:
+        """`parse` of each of `values`, in their order."""
+        return tuple(cls.parse(v) for v in values)
+
+
+# Older names of a controller: 'policy' is what `EnvConfig.controller` called DPC
+ALIASES: dict[str, Controller] = {"policy": Controller.DPC}

@@ -1,0 +1,63 @@
+"""What describes an export beyond its networks: where the shipped ones are, the env options it
+imposes on a use, and the cells an evaluation of it covers.
+
+    SHIPPED, SHIPPED_PAPER                 the exports in the package (docs/results.md)
+    env_overrides(artefacts, task)         the env options it was trained with, for a use on `task`
+    export_cells(export_dir, arms, ...)    its artefacts, the arms to evaluate, the env options
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.registry import DEFAULT_TASK, resolve_arm
+from dpc_mjx.io.load import Artefacts, load
+from dpc_mjx.robots.spec_json import arm_argument
+from dpc_mjx.robots.variants import arm_name
+from dpc_mjx.serialization import tuples
+
+SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the trained run's export
+# the paper's recipe (`RECIPES["paper"]`: SAC from a random actor, no oracle label for the actor)
+SHIPPED_PAPER = SHIPPED.with_name("regular-paper")
+# The env options that belong to the policy rather than the task (they follow an export to any
+# task), with the values of exports written before they existed
+_POLICY_ENV_BEFORE = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
+_CHOSEN_PER_USE = ("controller", "engine")  # env options an export's env_config never imposes
+
+
+def env_overrides(artefacts: Artefacts, task: str | None = None) -> dict:
+    """The env options an export was trained with (its sidecar's env_config), to evaluate and
+    transfer under the same disturbances; the controller and the engine are chosen per use. On
+    another `task` than the export's, only the policy's frame and the sensor model carry over
+    (the task brings its own disturbances). An export written before `EnvConfig.u_frame` and the
+    sensor model existed acted in the world frame and was trained with exact sensors."""
+    saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
+    saved = tuples({k: v for k, v in saved.items() if k not in _CHOSEN_PER_USE})
+    trained_on = artefacts.meta.get("extra", {}).get("task", DEFAULT_TASK)
+    if task is not None and task != trained_on:
+        return {k: saved[k] for k in _POLICY_ENV_BEFORE}
+    return saved
+
+
+def export_cells(
+    export_dir: str | pathlib.Path,
+    arms: list[str] | None,
+    controllers,
+    task: str,
+    env: dict | None = None,
+) -> tuple[Artefacts, list, dict]:
+    """What evaluating an export needs: its artefacts, the arms (`evaluate_export`'s rules; an
+    arm the A1 cannot hold up or an encoder missing for 'dpc' fails here, before any compile)
+    and the env options (the export's, then `env` over them)."""
+    artefacts = load(export_dir)
+    arms = [
+        artefacts.arm_spec(arm) if arm in artefacts.encoders else arm_argument(arm)
+        for arm in (arms or list(artefacts.meta["encoders"])[:1])
+    ]
+    for arm in arms:
+        resolve_arm(arm)  # the A1 holds it up (`control.static_balance`), before any compile
+    if Controller.DPC in Controller.parse_all(controllers):  # 'policy' too; unknown names fail
+        for arm in arms:
+            artefacts.encoder(arm_name(arm))
+    return artefacts, arms, {**env_overrides(artefacts, task), **(env or {})}

@@ -1,0 +1,146 @@
+"""Beyond the paper: start the high-level estimator from a privileged regression.
+
+The paper trains SAC from scratch. On our reaching task SAC from scratch did not beat MBC within
+1e6 env steps on a CPU (docs/results.md), while a policy regressed on the oracle's u did. So the
+actor may start from that regression, a teacher-student warm start: the teacher is the oracle
+(the measured mount wrench, privileged), the student sees only what DPC sees (its observation,
+`policy.POLICY_INPUTS`); SAC then trains it on the paper's reward as usual
+(`SacConfig.actor_warmup_steps` lets the critics learn its value first).
+
+    carry, report = regress_actor(trainer, carry, adapter, data, u_scale)
+
+Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) (MSE; u_oracle in
+the policy's frame, `EnvConfig.u_frame`: turned into the yaw frame by the row's heading), and its
+exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
+samples (`Dataset.u_oracle`, collected with MBC); the observation statistics start from the same
+samples. The last `val_fraction` of the samples are held out (`Dataset.split`): the epoch with
+the lowest held-out loss is kept (`fitting.fit`: at most `epochs`, stopping after `patience`
+without improvement), so components of u that the observation does not predict stay near their
+mean instead of fitting noise, and the report gives the held-out R^2 per component.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from brax.training.acme import running_statistics
+
+from dpc_mjx import fitting
+from dpc_mjx.adapter.data import Dataset
+from dpc_mjx.adapter.networks import AdapterConfig, EncoderState
+from dpc_mjx.errors import DpcError
+from dpc_mjx.policy.policy import observation_size, policy_observation
+from dpc_mjx.stats import r2
+
+U_CLIP = 0.95  # targets stay inside tanh's range
+
+# `trainer` is SAC's (`sac.trainer.Trainer`, `Carry`), taken by what it has, so that this layer
+# imports no SAC: trainer.observation_size, .critic_observation_size, .action_size,
+# .policy_inputs, .networks.policy_network, .policy_optimizer; carry.training.policy_params,
+# .normalizer (and `.replace`).
+_Trainer = Any
+_Carry = Any
+
+
+def regress_actor(
+    trainer: _Trainer,
+    carry: _Carry,
+    adapter_config: AdapterConfig,
+    encoder: EncoderState,
+    data: Dataset,
+    u_scale,
+    *,
+    u_frame: str = "yaw",
+    epochs: int = 30,
+    patience: int = 5,
+    batch_size: int = 256,
+    learning_rate: float = 1e-3,
+    init_std: float = 0.1,
+    val_fraction: float = 0.1,
+    seed: int = 0,
+) -> tuple[_Carry, dict]:
+    """`carry` with its actor and observation statistics fitted to the oracle's u on `data`
+    (in `u_frame`, the env's `EnvConfig.u_frame`), and a report {'r2': per u component on
+    held-out samples, 'val_mse', 'samples'}."""
+    _check_trainer(trainer, adapter_config)
+    u_scale = np.asarray(u_scale, np.float32)
+
+    def arrays(part: Dataset) -> tuple[jax.Array, jax.Array]:
+        """(obs (N, observation_size) the policy's, target (N, 6) in action units)."""
+        obs = policy_observation(
+            adapter_config, encoder, jp.asarray(part.observation), trainer.policy_inputs
+        )
+        target = np.clip(part.u_oracle_in(u_frame) / u_scale, -U_CLIP, U_CLIP)
+        return obs, jp.asarray(target)
+
+    train, val = (arrays(part) for part in data.split(val_fraction))
+    normalizer = running_statistics.update(carry.training.normalizer, train[0])
+    predict = _predictor(trainer.networks.policy_network, normalizer)
+
+    def loss(params, batch):
+        obs, target = batch
+        mean, std = predict(params, obs)
+        return jp.mean((mean - target) ** 2) + jp.mean((std - init_std) ** 2)
+
+    params, history = fitting.fit(
+        loss,
+        carry.training.policy_params,
+        train,
+        val,
+        learning_rate=learning_rate,
+        batch_size=batch_size,
+        epochs=epochs,
+        patience=patience,
+        key=jax.random.PRNGKey(seed),
+        diverged_hint="lower the learning_rate of regress_actor or check the data for NaN.",
+        desc="actor regression",
+    )
+    report = _report(predict, params, val, history, len(data), trainer.action_size)
+    training = carry.training.replace(
+        policy_params=params,
+        policy_opt=trainer.policy_optimizer.init(params),
+        normalizer=normalizer,
+    )
+    return carry.replace(training=training), report
+
+
+def _check_trainer(trainer: _Trainer, adapter_config: AdapterConfig) -> None:
+    """`DpcError` unless the trainer's actor observes what the regression feeds it."""
+    expected = observation_size(trainer.policy_inputs, adapter_config.latent_size)
+    if trainer.observation_size != expected:
+        raise DpcError(
+            f"The policy observes {trainer.observation_size} values, {trainer.policy_inputs} "
+            f"with latent_size {adapter_config.latent_size} make {expected}."
+        )
+    if trainer.critic_observation_size != trainer.observation_size:
+        raise DpcError(
+            "The oracle regression cannot start a run with an asymmetric critic "
+            "(SacConfig.critic_privileged): its data has no privileged values for the critics' "
+            "statistics. Use actor_init='random' or critic_privileged=false."
+        )
+
+
+def _predictor(policy_network, normalizer):
+    """params, obs (N, observation_size) -> (mean action tanh(loc), exploration scale), (N, 6)
+    each."""
+
+    def predict(params, obs):
+        loc, scale = jp.split(policy_network.apply(normalizer, params, obs), 2, axis=-1)
+        return jp.tanh(loc), jax.nn.softplus(scale) + 1e-3
+
+    return predict
+
+
+def _report(predict, params, val, history: dict, samples: int, action_size: int) -> dict:
+    """The fit on the held-out samples: per-component R^2, MSE, the epochs trained."""
+    pred = np.asarray(predict(params, val[0])[0])
+    y_va = np.asarray(val[1])
+    return {
+        "samples": samples,
+        "best_epoch": history["best_epoch"] + 1,  # epochs trained
+        "val_mse": float(np.mean((pred - y_va) ** 2)),
+        "r2": [float(v) for v in r2(y_va, pred, floor=1e-12)][:action_size],
+    }

@@ -1,0 +1,140 @@
+"""The README's Python snippets run as written (`exec`, in the README's order).
+
+A reader runs them as one session: the Quick start's snippets share one namespace (later ones use
+the names of earlier ones). Two snippets need more than the README gives them:
+- the training pipeline runs on a tiny budget (`TINY`: each README text is replaced by a small
+  one, and each must occur in the snippet exactly once, so an edit of the README that drops one
+  fails here instead of training for hours); it is `slow` (a dozen compiles);
+- the deployment loop gets `measurement`, the robot's reading: what exact sensors read on the
+  shipped export's robot standing at its home pose (tests/test_deploy.py has noisy ones).
+`test_every_snippet_is_run` fails on a snippet that no test runs. The default suite runs the
+deployment snippet (its compile is tests/test_deploy.py's, from the compilation cache) and imports
+every name the snippets import; the Quick start's snippets (a few minutes of compiling and 20 s
+of walking) and the pipeline are `slow` (`make test-all`).
+"""
+
+import ast
+import dataclasses
+import importlib
+import importlib.util
+import pathlib
+import re
+
+import mujoco
+import numpy as np
+import pytest
+from test_sac import _CONFIG
+
+from dpc_mjx.deploy import Measurement
+from dpc_mjx.robots import build, layout
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+SESSION = "import jax, numpy as np"  # the first line of the Quick start's first snippet
+PIPELINE = "sac.train("  # the training pipeline's snippet holds this
+DEPLOY = "Deployment("  # the deployment loop's snippet holds this
+
+# The tiny SAC of tests/test_sac.py (3 epochs of 32 actor steps x 8 envs), without evaluations.
+_TINY_FIELDS = ("num_timesteps", "num_envs", "batch_size", "grad_updates_per_step")
+_TINY_FIELDS += ("min_replay_size", "max_replay_size", "epoch_steps")
+TINY_SAC = {name: getattr(_CONFIG, name) for name in _TINY_FIELDS} | {"eval_every": 0}
+# README text -> what the test runs instead: one chunk of 64 envs x 50 steps of data, the tiny
+# SAC above, 2 episodes of 10 steps in each evaluation cell.
+TINY = {
+    "samples=100_000": "samples=3_200",
+    '"so100", controller="mbc"), 30_000)': '"so100", controller="mbc"), 3_200)',
+    'recipe("paper").sac,': 'dataclasses.replace(recipe("paper").sac, **TINY_SAC),',
+    "dpc_policy_for=art.dpc_policy)": "dpc_policy_for=art.dpc_policy, episodes=2, steps=10)",
+}
+
+
+def snippets() -> list[str]:
+    """Every ```python block of README.md, in order."""
+    text = (ROOT / "README.md").read_text()
+    return re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
+
+
+def _run(code: str, namespace: dict, name: str) -> None:
+    exec(compile(code, f"README.md ({name})", "exec"), namespace)  # noqa: S102 (our README)
+
+
+def _session() -> list[str]:
+    """The Quick start's snippets: from the first through the last before the pipeline's."""
+    blocks = snippets()
+    first = next(i for i, b in enumerate(blocks) if b.startswith(SESSION))
+    end = next(i for i, b in enumerate(blocks) if PIPELINE in b)
+    return blocks[first:end]
+
+
+def test_every_snippet_is_run():
+    blocks = snippets()
+    run = _session() + [b for b in blocks if PIPELINE in b or DEPLOY in b]
+    assert len(blocks) >= 6, "README.md lost its Python snippets"
+    assert sorted(run) == sorted(blocks), "a README snippet no test runs"
+
+
+def test_every_name_a_snippet_imports_exists():
+    """The cheap part (default suite): each `import` and `from ... import` of every snippet."""
+    for code in snippets():
+        for node in ast.walk(ast.parse(code)):
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    importlib.import_module(alias.name)
+            elif isinstance(node, ast.ImportFrom):
+                module = importlib.import_module(node.module)
+                for alias in node.names:
+                    assert hasattr(module, alias.name) or importlib.util.find_spec(
+                        f"{node.module}.{alias.name}"
+                    ), f"README: `from {node.module} import {alias.name}` fails"
+
+
+@pytest.mark.slow
+def test_quick_start_snippets(capsys):
+    namespace: dict = {}
+    for i, code in enumerate(_session()):
+        _run(code, namespace, f"Quick start snippet {i + 1}")
+    assert "fall" in capsys.readouterr().out  # closed_loop.summarize's line
+    assert namespace["ep"]["return"].shape == (8,)  # run_episodes' 8 episodes
+
+
+@pytest.mark.slow
+def test_training_pipeline_snippet_on_a_tiny_budget(tmp_path, monkeypatch):
+    (code,) = [b for b in snippets() if PIPELINE in b]
+    for readme, tiny in TINY.items():
+        assert code.count(readme) == 1, f"the training snippet no longer holds {readme!r}"
+        code = code.replace(readme, tiny)
+    monkeypatch.chdir(tmp_path)  # the snippet writes runs/sac and runs/export
+    namespace = {"dataclasses": dataclasses, "TINY_SAC": TINY_SAC}
+    _run(code, namespace, "the training pipeline")
+    cells = namespace["cells"]
+    assert len(cells) == 6  # 2 arms x 3 controllers
+    assert (tmp_path / "runs/export").is_dir()
+
+
+def _standing_measurement(arm: str):
+    """What exact sensors read on the A1 with `arm` standing still at its home pose."""
+    model = build(arm)
+    lay = layout(model)
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    mujoco.mj_forward(model, data)
+    rot = data.xmat[lay.trunk].reshape(3, 3)
+    return Measurement(
+        quat=data.qpos[3:7].copy(),
+        gyro=np.zeros(3),
+        accel=rot.T @ np.array([0.0, 0.0, 9.81]),  # at rest: specific force, trunk frame
+        leg_q=data.qpos[lay.leg_qpos].copy(),
+        leg_qd=np.zeros(12),
+        arm_q=data.qpos[lay.arm_qpos].copy(),
+        arm_qd=np.zeros(len(lay.arm_dof)),
+        arm_targets=data.ctrl[lay.arm_act].copy(),
+        command=np.zeros(3),
+    )
+
+
+def test_deployment_snippet():
+    (code,) = [b for b in snippets() if DEPLOY in b]
+    namespace = {"measurement": _standing_measurement("regular")}  # the shipped export's arm
+    _run(code, namespace, "the deployment loop")
+    tau = np.asarray(namespace["tau"])
+    assert tau.shape == (12,) and np.all(np.isfinite(tau))
