@@ -5,10 +5,11 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-test
 BENCH_STAMP := $(VENV)/.installed-bench
+DOCS_STAMP := $(VENV)/.installed-docs
 LATEST := .venv-latest
-EXTRAS := test,render,urdf
+EXTRAS := test,render,urdf,onnx
 
-.PHONY: install render-deps demo test test-all test-latest bench mjcf lint clean
+.PHONY: install render-deps demo test test-all test-latest bench mjcf docs lint clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -72,6 +73,16 @@ bench: $(BENCH_STAMP)
 
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf
+
+# The documentation site (mkdocs.yml): docs/*.md and the API reference generated from the
+# docstrings (griffe reads the source, nothing runs), built strictly into site/: a warning, a
+# broken link, anchor or cross-reference fails. NO_MKDOCS_2_WARNING: mkdocs-material's notice.
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install -q -c constraints.txt -e ".[$(EXTRAS),docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --clean --site-dir site
 
 # ruff, then the layers of the README's Architecture (import-linter's contract in pyproject.toml)
 lint: $(STAMP)

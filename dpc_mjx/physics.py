@@ -5,32 +5,44 @@ rollout loop are the same code under either engine (`EnvConfig.engine`):
 
     'mjx'     `mjx.forward` / `mjx.step` on the device (float32)
     'native'  `mujoco.mj_forward` / `mujoco.mj_step` on the same compiled `MjModel` (float64),
-              called through `jax.pure_callback` once per physics tick for the whole env batch
-              (optionally split over threads: `NativePhysics(threads=...)`)
+              called through `jax.pure_callback` once per physics tick for the whole env batch:
+              one `mujoco.batch.Batch` of the batch's size steps every env in C (its own
+              thread pool, the GIL released: `NativePhysics(threads=...)`)
 
 What crosses into MuJoCo C each tick (`INPUTS`): the state (time, qpos, qvel), the solver's warm
-start and what the controller and the task set (ctrl, xfrc_applied, eq_active). What comes back
-(`OUTPUTS`): the new state and warm start, and the quantities `mj_step` computed at the state it
-started from, as `mjx.step` leaves them too (body and site poses, COM-based kinematics, sensors:
-positions are one step old, velocities new). The other fields of `mjx.Data` (contacts,
-constraint forces, ...) are not filled by the native engine; nothing in the env reads them.
+start and what the controller and the task set (ctrl, xfrc_applied, eq_active), written into the
+Batch's state rows. What comes back (`OUTPUTS`): the new state and warm start, and the quantities
+`mj_step` computed at the state it started from, as `mjx.step` leaves them too (body and site
+poses, COM-based kinematics, sensors: positions are one step old, velocities new). The other
+fields of `mjx.Data` (contacts, constraint forces, ...) are not filled by the native engine;
+nothing in the env reads them. The outputs are bit for bit those of a loop of `mj_step` over one
+`MjData` per env (tests/test_physics.py keeps that loop as the reference), at any thread count.
 
 The state travels as float32 between ticks (the env's dtype), so a native episode rounds qpos
 and qvel to float32 every 4 ms; that is far below the engines' own differences (contact model,
 solver), which are what sim-to-sim measures. A step that MuJoCo flags as unstable (its bad
-qpos/qvel/qacc warnings, after which it would silently reset the data to qpos0) comes back as
-NaN, so the env's NaN guard ends that episode as it does for MJX.
+qpos/qvel/qacc warnings, after which it would silently reset the data to qpos0), or one in which
+MuJoCo raises an error (`mujoco.batch.SimulationError`, e.g. its arena overflowing; a warning
+names it), comes back as NaN, so the env's NaN guard ends that episode as it does for MJX. A
+forward, as `mj_forward`, checks and resets nothing.
+
+JAX's persistent compilation cache never stores a native-engine program: jax 0.9.2 refuses to
+write any executable that holds host callbacks (`jax._src.compiler._cache_write`), so these
+programs compile afresh in every process.
 """
 
 from __future__ import annotations
 
+import copy
 import math
-from concurrent.futures import ThreadPoolExecutor
+import threading
+import warnings
 
 import jax
 import mujoco
 import numpy as np
 from mujoco import mjx
+from mujoco.batch import Batch, SimulationError
 
 from dpc_mjx.errors import DpcError
 
@@ -64,9 +76,14 @@ class MjxPhysics:
 
 
 class NativePhysics:
-    """MuJoCo C on the host, one `MjData` per thread. One thread by default: on the 2-core
-    machine of docs/benchmarks.md two threads were 0.7x as fast (the field copies hold the GIL,
-    and a pool costs its own dispatch every tick)."""
+    """MuJoCo C on the host: each tick, the whole env batch in one `mujoco.batch.Batch` (one per
+    batch size seen), stepped in C on `threads` threads with the GIL released (Batch's nthread).
+
+    One thread by default (results are bit-identical at any count). On the 2-core machine of
+    docs/benchmarks.md (`experiments/bench_limit.py`, the reaching env) two threads paid when it
+    was idle, 1,979 vs 1,434 env steps/s at batch 64 and 3,196 vs 2,876 at batch 256, and not
+    when other jobs loaded it (468 vs 466 at batch 64): pass `threads` where cores are free. One
+    thread is what a process pinned to one core (issue 26's target) runs."""
 
     def __init__(self, model: mujoco.MjModel, threads: int = 1):
         if model.na or model.nmocap or model.nplugin:
@@ -75,12 +92,18 @@ class NativePhysics:
                 f"actuator activations ({model.na}), mocap bodies ({model.nmocap}) or plugins "
                 f"({model.nplugin}). Use engine='mjx' for it."
             )
-        self.model = model
         if threads < 1:
             raise DpcError(f"NativePhysics needs threads >= 1, got {threads}.")
+        self.model = model
         self.threads = threads
-        self._datas = [mujoco.MjData(model) for _ in range(self.threads)]
-        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        # Batch.forward checks qpos and qvel as mj_step does (mj_forward does not) and resets a
+        # bad state: forward runs on a copy of the model that does not reset, as mj_forward
+        self._no_reset = copy.copy(model)
+        self._no_reset.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        # (batch size, advance) -> its Batch and bound fields, each (n, *MjData's shape) float64:
+        # INPUTS are views of the state rows, the derived OUTPUTS are refreshed by every call
+        self._batches: dict[tuple[int, bool], tuple[Batch, dict[str, np.ndarray]]] = {}
+        self._lock = threading.Lock()  # a Batch and its bound arrays serve one call at a time
         template = mjx.make_data(model, impl="jax")
         # per env shapes and dtypes of the mjx.Data fields (xmat: (nbody, 3, 3) as in MJX)
         self._shapes = {k: getattr(template, k).shape for k in set(INPUTS) | set(OUTPUTS)}
@@ -103,40 +126,54 @@ class NativePhysics:
         )
         return d.replace(**dict(zip(OUTPUTS, out, strict=True)))
 
+    def _batch(self, n: int, advance: bool) -> tuple[Batch, dict[str, np.ndarray]]:
+        """The Batch of `n` simulations for steps (`advance`) or forwards and its bound `INPUTS`
+        and `OUTPUTS`, made once."""
+        if (n, advance) not in self._batches:
+            batch = Batch(self.model if advance else self._no_reset, n, self.threads)
+            fields = {k: batch.bind(k) for k in (*INPUTS, *OUTPUTS)}
+            self._batches[n, advance] = batch, fields
+        return self._batches[n, advance]
+
     def _host(self, advance: bool, *inputs: np.ndarray) -> list[np.ndarray]:
         """Host side of one tick: `inputs` (`INPUTS`, each (*batch, *field)) -> `OUTPUTS`."""
-        x = dict(zip(INPUTS, inputs, strict=True))
-        batch = np.shape(x["qpos"])[:-1]
-        n = math.prod(batch)
-        x = {k: np.asarray(v).reshape((n, *self._shapes[k])) for k, v in x.items()}
-        out = {k: np.empty((n, *self._shapes[k]), self._dtypes[k]) for k in OUTPUTS}
+        shape = np.shape(inputs[INPUTS.index("qpos")])[:-1]  # the batch's
+        n = math.prod(shape)
+        if n == 0:  # an empty batch (a Batch needs a simulation)
+            return [np.empty(shape + self._shapes[k], self._dtypes[k]) for k in OUTPUTS]
+        with self._lock:
+            batch, fields = self._batch(n, advance)
+            for k, x in zip(INPUTS, inputs, strict=True):
+                fields[k][...] = np.reshape(x, fields[k].shape)  # float32 (bool) -> float64
+            batch.warning[:, _BAD_STATE, 1] = 0  # the counts (warning: (n, mjNWARNING, 2))
+            failed = _run(batch, advance)
+            # a step that MuJoCo found unstable reset the sim's data to qpos0, and a sim in which
+            # it raised kept its state: report either as NaN (a forward resets nothing)
+            bad = np.any(batch.warning[:, _BAD_STATE, 1] > 0, axis=1) & advance
+            bad[failed] = True
+            out = {
+                k: fields[k].astype(self._dtypes[k]).reshape(shape + self._shapes[k])
+                for k in OUTPUTS
+            }
+        if bad.any():
+            for k in ("qpos", "qvel"):
+                out[k].reshape(n, -1)[bad] = np.nan
+        return [out[k] for k in OUTPUTS]
 
-        def run(thread: int, envs: np.ndarray) -> None:
-            m, d = self.model, self._datas[thread]
-            for i in envs:
-                d.time = x["time"][i]
-                d.qpos[:] = x["qpos"][i]
-                d.qvel[:] = x["qvel"][i]
-                d.qacc_warmstart[:] = x["qacc_warmstart"][i]
-                d.ctrl[:] = x["ctrl"][i]
-                d.xfrc_applied[:] = x["xfrc_applied"][i]
-                d.eq_active[:] = x["eq_active"][i]
-                for w in _BAD_STATE:
-                    d.warning[w].number = 0
-                (mujoco.mj_step if advance else mujoco.mj_forward)(m, d)
-                unstable = any(d.warning[w].number > 0 for w in _BAD_STATE)
-                for k in OUTPUTS:
-                    out[k][i] = np.reshape(getattr(d, k), self._shapes[k])
-                if unstable:  # MuJoCo reset the data to qpos0: report the step as NaN
-                    out["qpos"][i] = np.nan
-                    out["qvel"][i] = np.nan
 
-        parts = np.array_split(np.arange(n), self.threads)
-        if self._pool is None or n < 2:
-            run(0, np.arange(n))
-        else:
-            list(self._pool.map(run, range(self.threads), parts))
-        return [out[k].reshape(batch + self._shapes[k]) for k in OUTPUTS]
+def _run(batch: Batch, advance: bool) -> np.ndarray:
+    """`batch.step()` (advance) or `batch.forward()`: the ids of the sims in which MuJoCo raised
+    (they kept their state; the others ran to the end), with one warning that says so."""
+    try:
+        batch.step() if advance else batch.forward()
+    except SimulationError as e:
+        warnings.warn(
+            f"The native engine reports these sims as NaN (the env resets them): {e}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return np.asarray(e.ids, int)
+    return np.zeros(0, int)
 
 
 def make_physics(engine: str, model: mujoco.MjModel, mx: mjx.Model) -> MjxPhysics | NativePhysics:

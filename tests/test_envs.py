@@ -230,6 +230,17 @@ def test_config_parts_read_and_replace_by_the_same_flat_names():
         config.replace(sensors={"sensor_noise": -1.0})  # validated as the flat field is
 
 
+def test_tasks_answer_to_their_short_names():
+    """`make("reaching")` is `make("a1_arm/reaching")`: the robot prefix is optional."""
+    for task in registry.known_tasks():
+        short = task.split("/", 1)[1]
+        assert registry.get_config(short) == registry.get_config(task)
+        assert registry.default_arm(short) == registry.default_arm(task)
+        assert registry.task_name(short) == registry.task_name(task) == task
+    with pytest.raises(DpcError, match=r"known tasks: \[.*'reaching'"):
+        registry.get_config("juggling")
+
+
 def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
     def no_build(*_):
         pytest.fail("the model was built before the arguments were checked")

@@ -1,6 +1,8 @@
 """The native MuJoCo engine (`dpc_mjx.physics`): what it hands back equals MuJoCo C's own
-mj_step / mj_forward; an unstable step comes back as NaN; under the env, MJX and MuJoCo C agree
-on a short episode (the engines' contact models differ, so only to a tolerance)."""
+mj_step / mj_forward, and bit for bit the engine's former loop over one MjData (`_loop`, kept
+here as the reference); an unstable step or one in which MuJoCo raises comes back as NaN; under
+the env, MJX and MuJoCo C agree on a short episode (the engines' contact models differ, so only
+to a tolerance)."""
 
 import json
 import pathlib
@@ -18,7 +20,7 @@ import dpc_mjx
 from dpc_mjx import sim
 from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.errors import DpcError
-from dpc_mjx.physics import OUTPUTS, NativePhysics, make_physics
+from dpc_mjx.physics import _BAD_STATE, INPUTS, OUTPUTS, NativePhysics, make_physics
 from dpc_mjx.robots import build
 from dpc_mjx.run.cli import main
 from dpc_mjx.run.eval import evaluate
@@ -80,6 +82,107 @@ def test_native_engine_equals_mujoco_c(model, advance):
             assert np.max(np.abs(got - want)) <= FLOAT32_TOL * scale, (k, i)
     if advance:  # the state moved on
         assert np.all(out.time > 0)
+
+
+def _loop(model, advance: bool, x: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The native engine before `mujoco.batch` (the reference): `INPUTS` `x` (each (n, ...), the
+    env's dtypes) -> `OUTPUTS` (n, ...) through one MjData, env after env, in Python."""
+    template = mjx.make_data(model, impl="jax")
+    n = len(x["qpos"])
+    out = {
+        k: np.empty((n, *getattr(template, k).shape), getattr(template, k).dtype) for k in OUTPUTS
+    }
+    d = mujoco.MjData(model)
+    for i in range(n):
+        d.time = x["time"][i]
+        for k in INPUTS[1:]:
+            getattr(d, k)[:] = x[k][i]
+        for w in _BAD_STATE:
+            d.warning[w].number = 0
+        (mujoco.mj_step if advance else mujoco.mj_forward)(model, d)
+        for k in OUTPUTS:
+            out[k][i] = np.reshape(getattr(d, k), out[k].shape[1:])
+        if any(d.warning[w].number > 0 for w in _BAD_STATE):
+            out["qpos"][i] = out["qvel"][i] = np.nan
+    return out
+
+
+def _inputs(model, n: int) -> dict[str, np.ndarray]:
+    """`INPUTS` for `n` envs as the env holds them (float32, eq_active bool): `_batch`'s states
+    at random times and warm starts; env 2 so fast that MuJoCo flags its step as unstable."""
+    rng = np.random.default_rng(1)
+    x = {
+        **_batch(model, n),
+        "time": rng.uniform(0, 2, n),
+        "qacc_warmstart": rng.normal(0, 5, (n, model.nv)),
+        "eq_active": np.zeros((n, model.neq), bool),
+    }
+    x["qvel"][2] = 1e12
+    template = mjx.make_data(model, impl="jax")
+    return {k: np.asarray(x[k], getattr(template, k).dtype) for k in INPUTS}
+
+
+def _engine(physics, advance: bool, x: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """`OUTPUTS` of the engine under vmap (`vmap_method="broadcast_all"`: one call for the whole
+    batch) for `INPUTS` `x`, each (n, ...); only the outputs, so nothing is broadcast."""
+    d0 = mjx.make_data(physics.model, impl="jax")
+
+    def one(*inputs):
+        d = d0.replace(**dict(zip(INPUTS, inputs, strict=True)))
+        d = physics.step(d) if advance else physics.forward(d)
+        return {k: getattr(d, k) for k in OUTPUTS}
+
+    return jax.device_get(jax.vmap(one)(*(x[k] for k in INPUTS)))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("advance", [True, False], ids=["step", "forward"])
+def test_native_engine_equals_its_former_loop_bit_for_bit(
+    model, advance, threads, monkeypatch, tmp_path
+):
+    """vmap of the engine over a batch (an unstable env among them), three ticks in a row
+    (each from the last one's state): every output equals the former loop's exactly, the
+    unstable env's too (NaN after a step; as MuJoCo computed it after a forward)."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warning to MUJOCO_LOG.TXT here
+    physics = NativePhysics(model, threads=threads)
+    x = _inputs(model, 5)
+    for _ in range(3):
+        out, want = _engine(physics, advance, x), _loop(model, advance, x)
+        for k in OUTPUTS:
+            np.testing.assert_array_equal(out[k], want[k], err_msg=k)
+        assert np.isfinite(want["qpos"][[0, 1, 3, 4]]).all()
+        if advance:  # the unstable step: NaN
+            assert np.isnan(want["qpos"][2]).all() and np.isnan(want["qvel"][2]).all()
+        else:  # mj_forward checks and resets nothing
+            assert np.all(want["qvel"][2] == np.float32(1e12))
+        x = {**x, **{k: out[k] for k in ("time", "qpos", "qvel", "qacc_warmstart")}}
+
+
+def test_a_sim_in_which_mujoco_raises_comes_back_as_nan(monkeypatch, tmp_path):
+    """Twenty boxes piled into one spot overflow a small arena: MuJoCo raises in that sim
+    (`mujoco.batch.SimulationError`), which comes back as NaN with a warning; the other sim of
+    the batch runs as the former loop runs it."""
+    monkeypatch.chdir(tmp_path)
+    boxes = "".join(
+        f'<body pos="{i} 0 1"><freejoint/><geom type="box" size=".1 .1 .1"/></body>'
+        for i in range(20)
+    )
+    model = mujoco.MjModel.from_xml_string(
+        f'<mujoco><size memory="20K"/><worldbody><geom type="plane" size="50 50 .1"/>{boxes}'
+        "</worldbody></mujoco>"
+    )
+    d0 = mjx.make_data(model, impl="jax")
+    qpos = np.tile(np.asarray(d0.qpos), (2, 1))
+    qpos[1, 0::7], qpos[1, 2::7] = 0.0, 0.05  # sim 1: every box at the origin, in the floor
+    x = {k: np.tile(np.asarray(getattr(d0, k)), (2,) + (1,) * getattr(d0, k).ndim) for k in INPUTS}
+    x["qpos"] = qpos.astype(np.float32)
+    physics = NativePhysics(model)
+    with pytest.warns(RuntimeWarning, match="stack overflow"):
+        out = _engine(physics, True, x)
+    assert np.isnan(out["qpos"][1]).all() and np.isnan(out["qvel"][1]).all()
+    want = _loop(model, True, {k: v[:1] for k, v in x.items()})
+    for k in OUTPUTS:
+        np.testing.assert_array_equal(out[k][:1], want[k], err_msg=k)
 
 
 def test_unstable_step_comes_back_as_nan(model, monkeypatch, tmp_path):

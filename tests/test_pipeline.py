@@ -9,6 +9,7 @@ from dpc_mjx import DpcError, io
 from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.io.serialization import jsonable
 from dpc_mjx.run import cli, pipeline
+from dpc_mjx.run import eval as run_eval
 from dpc_mjx.run.config import RunConfig, read_run_config, recipe, start_run, tuples
 from dpc_mjx.run.pipeline import SHIPPED, SHIPPED_PAPER
 from dpc_mjx.sac import SacConfig
@@ -164,7 +165,7 @@ def test_eval_steps_follow_the_task_unless_set(tmp_path, monkeypatch):
     with pytest.raises(DpcError, match="eval_steps must be an int >= 1"):
         RunConfig().replace(eval_steps=0)
     steps = []
-    monkeypatch.setattr(pipeline, "evaluate", lambda *a, **kw: steps.append(kw["steps"]) or [])
+    monkeypatch.setattr(run_eval, "evaluate", lambda *a, **kw: steps.append(kw["steps"]) or [])
     pipeline.evaluate_run(pushing, tmp_path, SHIPPED)
     pipeline.evaluate_export(SHIPPED, task=pushing.task, csv=tmp_path / "e.csv")
     assert steps == [None, None]  # both: `eval.evaluate`'s default, the task's episode length

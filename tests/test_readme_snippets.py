@@ -33,6 +33,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 SESSION = "import jax, numpy as np"  # the first line of the Quick start's first snippet
 PIPELINE = "sac.train("  # the training pipeline's snippet holds this
 DEPLOY = "Deployment("  # the deployment loop's snippet holds this
+ONNX = "ort.InferenceSession("  # the ONNX snippet, run by tests/test_onnx.py
 
 # The tiny SAC of tests/test_sac.py (3 epochs of 32 actor steps x 8 envs), without evaluations.
 _TINY_FIELDS = ("num_timesteps", "num_envs", "batch_size", "grad_updates_per_step")
@@ -68,7 +69,7 @@ def _session() -> list[str]:
 
 def test_every_snippet_is_run():
     blocks = snippets()
-    run = _session() + [b for b in blocks if PIPELINE in b or DEPLOY in b]
+    run = _session() + [b for b in blocks if PIPELINE in b or DEPLOY in b or ONNX in b]
     assert len(blocks) >= 6, "README.md lost its Python snippets"
     assert sorted(run) == sorted(blocks), "a README snippet no test runs"
 

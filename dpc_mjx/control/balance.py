@@ -205,9 +205,14 @@ def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts,
 
     Args:
       params: the configuration (see BalanceParams).
-      com_pos, com_vel: (3,) COM position (m) and velocity (m/s).
-      rot: (3, 3) trunk orientation, body -> world.  ang_vel: (3,) world angular velocity (rad/s).
-      com_pos_des, com_vel_des, rot_des, ang_vel_des: the desired values of the same.
+      com_pos: (3,) COM position (m).
+      com_vel: (3,) COM velocity (m/s).
+      rot: (3, 3) trunk orientation, body -> world.
+      ang_vel: (3,) world angular velocity (rad/s).
+      com_pos_des: (3,) the desired COM position (m).
+      com_vel_des: (3,) the desired COM velocity (m/s).
+      rot_des: (3, 3) the desired trunk orientation.
+      ang_vel_des: (3,) the desired world angular velocity (rad/s).
       foot_pos: (4, 3) foot positions (m), order FR, FL, RR, RL.
       contact: (4,) bool, True for a stance foot.
       f_a: (3,) force (N) and tau_a: (3,) torque about the COM (N·m) applied to the trunk by the

@@ -1,11 +1,11 @@
-"""Tasks by name: `make("a1_arm/reaching", arm="regular", **overrides)`.
+"""Tasks by name: `make("reaching", arm="regular", **overrides)`.
 
-A name is `<robot>/<task>`. The task table maps a name to the task's env class, its default
-config factory and its default arm, all from the task's module in `dpc_mjx.envs.tasks` (the class
-declares `TASK`, `DEFAULT_ARM`, `check_arm` and `scene_spec`). `make` checks the name, the arm
-(known variant, one the task can use, one the A1 can hold up) and the overrides, raising
-`DpcError` before anything is built or compiled, then builds the env; `scene_spec` /
-`build_scene` give a task's scene alone.
+A name is `<task>` or, as before, `<robot>/<task>` ("a1_arm/reaching"). The task table maps a
+name to the task's env class, its default config factory and its default arm, all from the
+task's module in `dpc_mjx.envs.tasks` (the class declares `TASK`, `DEFAULT_ARM`, `check_arm`
+and `scene_spec`). `make` checks the name, the arm (known variant, one the task can use, one the
+A1 can hold up) and the overrides, raising `DpcError` before anything is built or compiled, then
+builds the env; `scene_spec` / `build_scene` give a task's scene alone.
 
     task            default arm   scene
     reaching        regular       robot on a floor; random arm targets, pushes, payloads
@@ -119,7 +119,15 @@ def build_scene(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.M
     return scene_spec(name, arm).compile()
 
 
+def task_name(name: str) -> str:
+    """The full name of task `name` ("reaching" -> "a1_arm/reaching"), to compare names."""
+    return name if name in TASKS or "/" in name else f"{ROBOT}/{name}"
+
+
 def _task(name: str) -> Task:
-    if name not in TASKS:
-        raise DpcError(f"Unknown task {name!r}; known tasks: {known_tasks()}.")
-    return TASKS[name]
+    """The task `name`, by its full name ("a1_arm/reaching") or its short one ("reaching")."""
+    task = TASKS.get(name) or TASKS.get(f"{ROBOT}/{name}")
+    if task is None:
+        short = sorted(n.split("/", 1)[1] for n in TASKS)
+        raise DpcError(f"Unknown task {name!r}; known tasks: {short} (or {known_tasks()}).")
+    return task

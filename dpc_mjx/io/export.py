@@ -23,6 +23,7 @@ from dpc_mjx.io import sidecar, sidecar_checks
 from dpc_mjx.policy.policy import PolicyState, policy_template
 from dpc_mjx.robots.spec_json import ArmLike
 from dpc_mjx.serialization import check_tree, jsonable, write_json, write_msgpack
+from dpc_mjx.writer import is_writer
 
 
 def export(
@@ -39,7 +40,8 @@ def export(
 ) -> pathlib.Path:
     """Write the policy, decoder and one encoder per arm to `out_dir`, then the sidecar `dpc.json`
     (last: a killed export leaves no sidecar, or the previous one, whose sha256s then reject the
-    files replaced since). Returns `out_dir`. The sidecar's keys: `dpc_mjx.io.sidecar`.
+    files replaced since). Returns `out_dir`. The sidecar's keys: `dpc_mjx.io.sidecar`. In a run
+    of several processes only process 0 writes (`dpc_mjx.writer`; the others check and return).
 
     `arms` gives each encoder's arm (a variant name or an ArmSpec/UrdfArm/RobotSpec), under the
     same key; `env_config` the action scaling (default `EnvConfig()`'s); `sac_config` and `extra`
@@ -93,7 +95,8 @@ def export(
         "decoder",
         "Pass the decoder trained with this adapter config.",
     )
-
+    if not is_writer():
+        return out
     out.mkdir(parents=True, exist_ok=True)
     for arm, entry in entries.items():
         entry["sha256"] = write_msgpack(out / entry["file"], encoders[arm])

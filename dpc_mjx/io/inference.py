@@ -7,13 +7,15 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
     policy = NumpyPolicy("export/", arm="regular")
     u = policy.u(obs, yaw)   # obs = [s_body, s_arm (2 n), p_arm (n_act), u_obs (6)], the raw
                              # env observation; yaw (rad) the heading; u in the world frame
+    u = policy.u(obs)        # u in the policy's frame (action_scaling.frame), as the ONNX
+                             # graph of `dpc-mjx onnx` gives it
 
     z = tanh(E((obs[:input_size] - mean_E) / std_E))                     latent (latent_size,)
     x = [s_body, z] or [s_body, z, u_obs]                                policy.inputs
     a = tanh(pi((x - mean_pi) / std_pi)[:action_size])                    action in [-1, 1]^6
     u = u_scale * a: [f_a (N), tau_a (N m)], per component, about the COM, in the frame
         action_scaling.frame: 'yaw' (heading-aligned; `u(obs, yaw)` turns it to the world
-        frame) or 'world'
+        frame, `u(obs)` leaves it in the yaw frame) or 'world'
 
 Every size and the layout come from the sidecar: s_body = obs[start:stop] with
 `observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
@@ -257,18 +259,17 @@ class NumpyPolicy:
         return np.tanh(_forward(self._pi, (pi_in - mean) / std)[..., : self.action_size])
 
     def u(self, obs, yaw=None) -> np.ndarray:
-        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the A1 COM, in the world frame: a
-        yaw-frame policy (`frame == 'yaw'`) needs the heading `yaw` (rad; () or (B,)), which
-        turns it: [R_z(yaw) f, R_z(yaw) tau]."""
+        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the A1 COM. Without `yaw`, in the
+        policy's frame (`frame`), what the ONNX graph gives; with the heading `yaw` (rad; () or
+        (B,)), in the world frame: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau]
+        (a world-frame policy's u as it is)."""
         if self.action_size != 6:
             raise ValueError(
                 f"u needs a 6-D action [f_a, tau_a], this policy has {self.action_size}."
             )
         u = self.action(obs) * self.scale
-        if self.frame == "world":
+        if self.frame == "world" or yaw is None:
             return u
-        if yaw is None:
-            raise ValueError("This policy's u is in the yaw frame: pass the heading, u(obs, yaw).")
         c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))
         out = u.copy()
         for i in (0, 3):  # force, then torque: R_z(yaw) v

@@ -11,7 +11,7 @@ from __future__ import annotations
 import pathlib
 
 from dpc_mjx.controllers import Controller
-from dpc_mjx.envs.registry import DEFAULT_TASK, resolve_arm
+from dpc_mjx.envs.registry import DEFAULT_TASK, resolve_arm, task_name
 from dpc_mjx.io.load import Artefacts, load
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import arm_name
@@ -35,7 +35,7 @@ def env_overrides(artefacts: Artefacts, task: str | None = None) -> dict:
     saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
     saved = tuples({k: v for k, v in saved.items() if k not in _CHOSEN_PER_USE})
     trained_on = artefacts.meta.get("extra", {}).get("task", DEFAULT_TASK)
-    if task is not None and task != trained_on:
+    if task is not None and task_name(task) != task_name(trained_on):
         return {k: saved[k] for k in _POLICY_ENV_BEFORE}
     return saved
 

@@ -20,6 +20,8 @@ Keys (format_version 1; `export` writes them all):
     encoders        {arm: {file, input_size, input_layout, arm_spec, sha256}}
     action_scaling  {u_scale (action_size,): N for f_a, N·m for tau_a; frame: 'yaw' or 'world'
                     (env_config.u_frame; absent: world); u: in words}
+    onnx            {opset, input, output, ...}: the graph `dpc-mjx onnx` writes of an arm
+                    (`onnx_graph.py`); absent in sidecars written before it: `ONNX`
     env_config, sac_config, extra   as given to `export`, or null
 """
 
@@ -46,6 +48,9 @@ DECODER_FILE = "decoder.msgpack"
 # The decoder's target: s_body's roll and pitch rate one env step later (rad/s, trunk frame).
 DECODER_TARGET = ("roll_rate", "pitch_rate")
 REEXPORT = "re-export the artefacts with dpc_mjx.io.export"
+# The ONNX graph of an arm's encoder and the policy (`onnx_graph.py`): its opset, its input (the
+# raw env observation, float32 (batch, input_size + 6)) and its output (u, float32 (batch, 6))
+ONNX = {"opset": 17, "input": "obs", "output": "u"}
 _ARM_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _REQUIRED = (
     *("format_version", "library_version", "adapter_config", "policy", "decoder", "encoders"),
@@ -133,6 +138,12 @@ def build(
             "frame": scaling.u_frame,
             "u": f"[f_a (N), tau_a (N m)] = u_scale * a (per component), {scaling.u_frame} "
             "frame, about the A1 COM",
+        },
+        "onnx": {
+            **ONNX,
+            "shapes": "obs float32 (batch, encoders.<arm>.input_size + 6): the raw env "
+            "observation; u float32 (batch, 6): [f_a (N), tau_a (N m)], action_scaling.frame",
+            "command": "dpc-mjx onnx --export DIR --arm ARM --out policy.onnx",
         },
         "env_config": dataclasses.asdict(env_config) if env_config is not None else None,
         "sac_config": sac_config,

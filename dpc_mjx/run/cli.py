@@ -12,7 +12,9 @@
     dpc-mjx sweep --upper-arm 0.10:0.30:8 --gripper-mass 0.1:0.6:8   every controller over a
                                        grid of arms, one batched model (CSV and heatmaps)
     dpc-mjx export --run runs/x        (re-)export a run's adapter and policy
+    dpc-mjx onnx --export DIR --arm so100 --out policy.onnx   its encoder + policy as one ONNX graph
     dpc-mjx render --out clip.mp4      a video of an episode (--compare mbc dpc: side by side)
+    dpc-mjx view --controller dpc      MuJoCo's viewer, live: keys steer, the mouse pushes
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
     dpc-mjx variants                   every arm variant built and stood in MJX
     dpc-mjx mjcf                       write every variant's MJCF into mjcf/
@@ -25,31 +27,21 @@ read as JSON where they parse as JSON, else as strings.
 from __future__ import annotations
 
 import argparse
-import json
 import pathlib
 import sys
 
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
+from dpc_mjx.run.cli_tools import (
+    CONTROLLER_NAMES,
+    TASK_HELP,
+    given,
+    parse_sets,
+    tool_commands,
+)
 
 _CONTROLLERS = [c.value for c in Controller]  # mbc observer dpc oracle, `dpc_mjx.controllers`
-_NAMES = " ".join(_CONTROLLERS)
-_CONTROLLERS_HELP = f"any of {_NAMES} (default: all four)"
-_TASK_HELP = "a task (`dpc_mjx.envs.known_tasks()`; default: reaching, `envs.DEFAULT_TASK`)"
-
-
-def _parse_sets(items: list[str]) -> dict:
-    out = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        if not sep or not name:
-            raise DpcError(f"Options take name=value, got {item!r} (e.g. sac.num_envs=32).")
-        try:
-            value = json.loads(text)
-        except json.JSONDecodeError:
-            value = text
-        out[name] = tuple(value) if isinstance(value, list) else value
-    return out
+_CONTROLLERS_HELP = f"any of {CONTROLLER_NAMES} (default: all four)"
 
 
 def _run_config(args: argparse.Namespace):
@@ -67,7 +59,7 @@ def _run_config(args: argparse.Namespace):
         device = jax.default_backend()
         print(f"device: {device} ({jax.device_count()} x {jax.devices()[0].device_kind})")
     base = recipe(getattr(args, "recipe", "default"), device)
-    return base.replace(**named, **_parse_sets(args.set))
+    return base.replace(**named, **parse_sets(args.set))
 
 
 def _train(args: argparse.Namespace) -> None:
@@ -76,25 +68,25 @@ def _train(args: argparse.Namespace) -> None:
 
     run = pathlib.Path(args.run)
     config = read_run_config(run) if args.resume and not args.set else _run_config(args)
-    train_and_evaluate(config, run, resume=args.resume)
+    train_and_evaluate(config, run, resume=args.resume, logdir=args.logdir)
     print(f"run folder: {run} (eval.md, summary.json, plots/, export/)")
 
 
 def _train_adapter(args: argparse.Namespace) -> None:
     from dpc_mjx.run.config import start_run  # noqa: PLC0415 (subcommand handler)
-    from dpc_mjx.run.pipeline import train_adapter  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.run.pipeline import run_events, train_adapter  # noqa: PLC0415 (handler)
 
     run = pathlib.Path(args.run)
     config = _run_config(args)
     start_run(config, run, resume=False)
-    train_adapter(config, run)
+    train_adapter(config, run, events=run_events(config, run, args.logdir))
     print(f"adapter saved in {run / 'adapter'}; continue with: dpc-mjx train --run {run} --resume")
 
 
 def _transfer(args: argparse.Namespace) -> None:
     from dpc_mjx.run.pipeline import transfer_arm  # noqa: PLC0415 (subcommand handler)
 
-    transfer_arm(args.export, args.arm, **_given(args, ("samples", "task", "seed")))
+    transfer_arm(args.export, args.arm, **given(args, ("samples", "task", "seed")))
 
 
 def _eval(args: argparse.Namespace) -> None:
@@ -108,17 +100,12 @@ def _eval(args: argparse.Namespace) -> None:
 def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
     """The keyword arguments that `eval` and `sim2sim` share (`eval_options`), CSV defaulted."""
     names = ("arms", "controllers", "task", "episodes", "steps", "seed", "out")
-    return _given(args, names) | {"csv": args.csv or _default_csv(args, csv_prefix)}
-
-
-def _given(args: argparse.Namespace, names: tuple[str, ...]) -> dict:
-    """The options `names` that have a value (None: the library's default, e.g. the task)."""
-    return {k: getattr(args, k) for k in names if getattr(args, k) is not None}
+    return given(args, names) | {"csv": args.csv or _default_csv(args, csv_prefix)}
 
 
 def _env_options(args: argparse.Namespace) -> dict:
     """`--env NAME=VALUE ...` with `--engine` (if given) as the engine."""
-    env = _parse_sets(args.env)
+    env = parse_sets(args.env)
     if getattr(args, "engine", None):
         if env.get("engine", args.engine) != args.engine:
             raise DpcError(f"--engine {args.engine} and --env engine={env['engine']} disagree.")
@@ -130,7 +117,7 @@ def _sim2sim(args: argparse.Namespace) -> None:
     from dpc_mjx.io.shipped import SHIPPED  # noqa: PLC0415 (subcommand handler)
     from dpc_mjx.run.sim2sim import sim2sim  # noqa: PLC0415 (subcommand handler)
 
-    sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=_parse_sets(args.env))
+    sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=parse_sets(args.env))
 
 
 def _sweep(args: argparse.Namespace) -> None:
@@ -141,26 +128,8 @@ def _sweep(args: argparse.Namespace) -> None:
         args.export,
         upper_arm=args.upper_arm,
         gripper_mass=args.gripper_mass,
-        env=_parse_sets(args.env),
-        **_given(args, names),
-    )
-
-
-def _render(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.render import render_rollout  # noqa: PLC0415 (subcommand handler)
-
-    render_rollout(
-        args.out,
-        **_given(args, ("task",)),
-        arm=args.arm,
-        controllers=tuple(args.compare or [args.controller]),
-        export=args.export,
-        seconds=args.seconds,
-        seed=args.seed,
-        episode=args.episode,
-        episodes=args.episodes,
-        width=args.width,
-        height=args.height,
+        env=parse_sets(args.env),
+        **given(args, names),
     )
 
 
@@ -174,36 +143,10 @@ def _default_csv(args: argparse.Namespace, prefix: str = "") -> pathlib.Path:
     return pathlib.Path("runs", "eval", name)
 
 
-def _export(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.pipeline import export_run  # noqa: PLC0415 (subcommand handler)
-
-    print(f"exported to {export_run(args.run, args.out)}")
-
-
-def _bench(args: argparse.Namespace) -> None:
-    from dpc_mjx.run.bench import print_table  # noqa: PLC0415 (subcommand handler)
-
-    print_table(args.arm, args.batches, args.calls)
-
-
 def _demo(args: argparse.Namespace) -> None:
     from dpc_mjx.run.demo import run_demo  # noqa: PLC0415 (subcommand handler)
 
     run_demo(quick=args.quick)
-
-
-def _variants(args: argparse.Namespace) -> None:
-    from dpc_mjx.robots import VARIANTS  # noqa: PLC0415 (subcommand handler)
-    from dpc_mjx.run.demo import run_variants  # noqa: PLC0415 (subcommand handler)
-
-    run_variants(args.variants or tuple(VARIANTS), batch=args.batch, seconds=args.seconds)
-
-
-def _mjcf(args: argparse.Namespace) -> None:
-    from dpc_mjx.robots.mjcf import write_mjcf  # noqa: PLC0415 (subcommand handler)
-
-    for path in write_mjcf(args.out_dir):
-        print(path)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -219,7 +162,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _training_commands(sub)
     _evaluation_commands(sub)
-    _tool_commands(sub)
+    tool_commands(sub)
     return parser
 
 
@@ -246,7 +189,7 @@ def _training_commands(sub) -> None:
         "description (README: Your own arm)",
     )
     p.add_argument("--samples", type=int, default=30_000)
-    p.add_argument("--task", help=_TASK_HELP)
+    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(handler=_transfer)
 
@@ -254,7 +197,7 @@ def _training_commands(sub) -> None:
 def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
     p.add_argument("--run", required=True, help="run folder (created)")
     p.add_argument("--arm", help="arm variant (default regular)")
-    p.add_argument("--task", help=_TASK_HELP)
+    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
     p.add_argument(
         "--recipe",
@@ -270,6 +213,7 @@ def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
         "docs/benchmarks.md, run.config.DEVICE_PRESETS)",
     )
     p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
+    p.add_argument("--logdir", help="TensorBoard events: LOGDIR/<run> (default RUN/tensorboard)")
     if resume:
         p.add_argument(
             "--timesteps", type=int, help="SAC env steps after the regression (default 0: none)"
@@ -299,7 +243,7 @@ def _evaluation_commands(sub) -> None:
     p.add_argument("--upper-arm", default="0.10:0.30:8", help="upper-arm length, m, low:high:count")
     p.add_argument("--gripper-mass", default="0.1:0.6:8", help="gripper masses, kg, low:high:count")
     p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
-    p.add_argument("--task", help=_TASK_HELP)
+    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--episodes", type=int, default=16, help="per grid point")
     p.add_argument("--steps", type=int, help="env steps per episode (default: the task's)")
     p.add_argument("--seed", type=int, default=1000)
@@ -313,7 +257,7 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
     arms = "arms: encoder names, variants, arm files or descriptions (default: the policy's arm)"
     p.add_argument("--arms", nargs="+", help=arms)
     p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
-    p.add_argument("--task", help=_TASK_HELP)
+    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--episodes", type=int, default=64)
     p.add_argument(
         "--steps",
@@ -327,50 +271,6 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
     csv = "one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)"
     p.add_argument("--csv", help=csv)
-
-
-def _tool_commands(sub) -> None:
-    """export, bench, render, variants, mjcf."""
-    p = sub.add_parser("export", help="export a run's adapter and policy")
-    p.add_argument("--run", required=True)
-    p.add_argument("--out", help="export folder (default: run/export)")
-    p.set_defaults(handler=_export)
-
-    p = sub.add_parser("bench", help="env steps/s, full env vs physics only")
-    p.add_argument("--arm", default="regular")
-    p.add_argument("--batches", type=int, nargs="+", default=[1, 64, 256])
-    p.add_argument("--calls", type=int, default=20)
-    p.set_defaults(handler=_bench)
-
-    p = sub.add_parser("render", help="a video (MP4 or GIF) of an episode, headless")
-    p.add_argument("--out", required=True, help="clip.mp4 or clip.gif")
-    p.add_argument("--task", help=_TASK_HELP)
-    p.add_argument("--arm", default="regular", help="a variant, an arm file or description")
-    p.add_argument("--controller", default=Controller.MBC.value, help=f"one of {_NAMES}")
-    p.add_argument("--compare", nargs="+", help="several controllers side by side, same episode")
-    p.add_argument("--export", help="for dpc and the env options (default: the shipped export)")
-    p.add_argument("--seconds", type=float, default=2.0)
-    p.add_argument("--seed", type=int, default=0, help="as dpc-mjx eval --seed")
-    p.add_argument("--episode", type=int, default=0, help="episode index within the seed")
-    p.add_argument(
-        "--episodes",
-        type=int,
-        help="the evaluation's episode count: replays its batch, so its episode to the last bit "
-        "(default: episode + 1 envs, which may round differently)",
-    )
-    p.add_argument("--width", type=int, default=480)
-    p.add_argument("--height", type=int, default=360)
-    p.set_defaults(handler=_render)
-
-    p = sub.add_parser("variants", help="build every arm variant and stand a batch of each")
-    p.add_argument("--variants", nargs="*", help="variant names (default: all)")
-    p.add_argument("--batch", type=int, default=16, help="envs per variant (default 16)")
-    p.add_argument("--seconds", type=float, default=1.0, help="simulated time (default 1)")
-    p.set_defaults(handler=_variants)
-
-    p = sub.add_parser("mjcf", help="write every variant's robot and scene MJCF")
-    p.add_argument("out_dir", nargs="?", default="mjcf")
-    p.set_defaults(handler=_mjcf)
 
 
 def _join_processes(args: argparse.Namespace) -> None:

@@ -22,6 +22,7 @@ from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.registry import DEFAULT_TASK, get_config
 from dpc_mjx.errors import DpcError
 from dpc_mjx.serialization import jsonable, read_json, tuples, write_json
+from dpc_mjx.writer import barrier, is_writer
 
 CONFIG_FILE = "config.json"
 ACTOR_INITS = ("random", "oracle_regression")
@@ -231,7 +232,8 @@ def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
 
 
 def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None:
-    """Write the run's config; when resuming, check that it is the one the folder holds."""
+    """Write the run's config (process 0); when resuming, check that it is the one the folder
+    holds."""
     run_dir = pathlib.Path(run_dir)
     path = run_dir / CONFIG_FILE
     if resume:
@@ -243,7 +245,9 @@ def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None
             )
     elif path.exists():
         raise DpcError(f"{run_dir} already holds a run; resume it or pick another folder.")
-    write_json(path, config.to_json())
+    barrier("run folder checked")  # by every process, before process 0 writes into it
+    if is_writer():
+        write_json(path, config.to_json())
 
 
 def _as_run(saved: dict) -> dict | None:

@@ -34,6 +34,7 @@ from dpc_mjx.envs.rollout import Policy, run_episodes
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
+from dpc_mjx.writer import is_writer
 
 CONTROLLERS = tuple(Controller)  # mbc, observer, dpc, oracle: the tables' order
 
@@ -253,8 +254,11 @@ def write_episodes_csv(
     path: str | pathlib.Path, cells: list[CellResult], engines: list[str] | None = None
 ) -> pathlib.Path:
     """Every episode of `cells` as a CSV row (`episode_rows`), to re-analyse, pair or bootstrap a
-    table without re-running it; with `engines` (one per cell), an `engine` column first."""
+    table without re-running it; with `engines` (one per cell), an `engine` column first.
+    Written by process 0 only (`writer.is_writer`)."""
     path = pathlib.Path(path)
+    if not is_writer():
+        return path
     path.parent.mkdir(parents=True, exist_ok=True)
     measures = dict.fromkeys(k for c in cells for k in c.task)
     columns = ["engine"] * (engines is not None) + [*EPISODE_COLUMNS, *measures]
@@ -320,3 +324,28 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
                         "in falls | | | | | |"
                     )
     return rows
+
+
+def evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[CellResult]:
+    """`evaluate`, printing the table row by row, writing it to `out` (markdown) and every
+    episode to `csv` (`write_episodes_csv`). A line above the table names a native engine."""
+    engine = (kwargs.get("overrides") or {}).get("engine", "mjx")
+    preface = [] if engine == "mjx" else [f"physics: {engine} MuJoCo C (engine={engine!r})", ""]
+    print("\n".join([*preface, TABLE_HEADER]), flush=True)
+
+    def show(cell: CellResult) -> None:
+        print(table_row(cell), flush=True)
+
+    cells = evaluate(arms, controllers, on_result=show, **kwargs)
+    paired = paired_rows(cells)
+    tasks = [TASK_HEADER, *map(task_row, cells)]
+    print("\n" + "\n".join(tasks), flush=True)
+    if paired:
+        print("\n" + "\n".join([PAIRED_HEADER, *paired]), flush=True)
+    if out is not None and is_writer():
+        lines = [*preface, TABLE_HEADER, *map(table_row, cells), "", *tasks]
+        lines += ["", PAIRED_HEADER, *paired] if paired else []
+        pathlib.Path(out).write_text("\n".join(lines) + "\n")
+    if csv is not None:
+        print(f"per-episode rows: {write_episodes_csv(csv, cells)}", flush=True)
+    return cells

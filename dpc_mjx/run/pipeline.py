@@ -12,8 +12,11 @@ The run folder (every file written atomically; `resume=True` continues a killed 
     sac/                 warm_start.json (the regression), sac_log.csv and the SAC checkpoint
     export/              the deployable artefacts (`dpc_mjx.io.export`; `dpc-mjx eval --run`)
     plots/               adapter_loss.png, posture_prediction.png, training_curve.png
+    tensorboard/         TensorBoard event files of the same numbers (`run.tensorboard`)
     eval.md              MBC / observer / DPC / oracle table (`dpc_mjx.run.eval` protocol)
     summary.json         wall time of every stage, sample counts, the evaluation
+
+In a run of several processes only process 0 writes (`dpc_mjx.writer`).
 """
 
 from __future__ import annotations
@@ -40,19 +43,10 @@ from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run import plots
 from dpc_mjx.run.config import RunConfig, read_run_config, start_run
-from dpc_mjx.run.eval import (
-    CONTROLLERS,
-    PAIRED_HEADER,
-    TABLE_HEADER,
-    TASK_HEADER,
-    CellResult,
-    evaluate,
-    paired_rows,
-    table_row,
-    task_row,
-    write_episodes_csv,
-)
+from dpc_mjx.run.eval import CONTROLLERS, CellResult, evaluate_table
+from dpc_mjx.run.tensorboard import NO_EVENTS, RunEvents, run_events
 from dpc_mjx.serialization import write_json
+from dpc_mjx.writer import barrier, is_writer
 
 DATA_FILE = "data.npz"  # the adapter's samples, in the run's adapter folder
 SUMMARY_FILE = "summary.json"
@@ -60,15 +54,24 @@ EPISODES_FILE = "eval_episodes.csv"  # the evaluation, one row per episode
 
 
 def train_and_evaluate(
-    config: RunConfig, run_dir: str | pathlib.Path, *, resume: bool = False, progress: bool = True
+    config: RunConfig,
+    run_dir: str | pathlib.Path,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+    logdir: str | pathlib.Path | None = None,
 ) -> dict:
-    """Run every stage into `run_dir`; returns the summary (also `summary.json`)."""
+    """Run every stage into `run_dir`; returns the summary (also `summary.json`). TensorBoard
+    events: in `run_dir/tensorboard`, or `logdir/<run folder's name>` (`tensorboard.logdir_of`)."""
     config.validate()
     run_dir = pathlib.Path(run_dir)
     start_run(config, run_dir, resume=resume)
+    events = run_events(config, run_dir, logdir)
     timings: dict[str, float] = {}
-    adapter = train_adapter(config, run_dir, resume=resume, progress=progress, timings=timings)
-    result = train_policy(config, run_dir, adapter, resume=resume, progress=progress)
+    adapter = train_adapter(
+        config, run_dir, resume=resume, progress=progress, timings=timings, events=events
+    )
+    result = train_policy(config, run_dir, adapter, resume=resume, progress=progress, events=events)
     timings.update(
         {f"sac_{k}": v for k, v in result.timing.items()},
         sac_wall_seconds=result.history[-1]["wall_seconds"] if result.history else 0.0,
@@ -76,6 +79,7 @@ def train_and_evaluate(
     export_dir = export(config, run_dir, adapter, result)
     t0 = time.perf_counter()
     cells = evaluate_run(config, run_dir, export_dir)
+    events.eval(cells)
     timings["eval_seconds"] = time.perf_counter() - t0
     summary = {
         "config": config.to_json(),
@@ -87,7 +91,8 @@ def train_and_evaluate(
         "timings_seconds": timings,
         "eval": [c.summary() for c in cells],
     }
-    write_json(run_dir / SUMMARY_FILE, summary)
+    if is_writer():
+        write_json(run_dir / SUMMARY_FILE, summary)
     return summary
 
 
@@ -98,12 +103,16 @@ def train_adapter(
     resume: bool = False,
     progress: bool = True,
     timings: dict | None = None,
+    events: RunEvents = NO_EVENTS,
 ) -> adapter_lib.Adapter:
-    """Collect random-motion data with MBC and train the adapter (or load it when resuming)."""
+    """Collect random-motion data with MBC and train the adapter (or load it when resuming);
+    its losses also as TensorBoard `events`."""
     folder = run_dir / "adapter"
     if resume and (folder / adapter_checkpoint.RECORD).exists():
         print(f"adapter: loading {folder}", flush=True)
-        return adapter_checkpoint.load(folder)
+        loaded = adapter_checkpoint.load(folder)
+        events.adapter(loaded.history)
+        return loaded
     env = make(config.task, arm=config.arm, controller=Controller.MBC, **config.env_overrides)
     print(f"adapter: collecting {config.samples:,} samples ({config.arm}, MBC)", flush=True)
     data = adapter_lib.collect(
@@ -111,8 +120,10 @@ def train_adapter(
     )
     cfg = config.adapter  # its seed is the run's (`RunConfig.seed`)
     trained = adapter_lib.train(data, cfg, progress=progress)
-    data.save(folder / DATA_FILE)  # kept for the actor's warm start (and for analysis)
-    adapter_checkpoint.save(folder, trained)
+    if is_writer():
+        data.save(folder / DATA_FILE)  # kept for the actor's warm start (and for analysis)
+        adapter_checkpoint.save(folder, trained)
+    barrier("adapter saved")  # the other processes read data.npz next
     h = trained.history
     print(
         f"adapter: {h['samples']:,} samples from {h['env_steps']:,} env steps in "
@@ -123,9 +134,11 @@ def train_adapter(
     )
     if timings is not None:
         timings.update(data_seconds=h["collect_seconds"], adapter_seconds=h["seconds"])
-    plots.adapter_loss(h, run_dir / "plots" / "adapter_loss.png")
-    _, held_out = data.split(cfg.val_fraction)
-    posture_figure(trained, held_out, run_dir / "plots" / "posture_prediction.png")
+    events.adapter(h)
+    if is_writer():
+        plots.adapter_loss(h, run_dir / "plots" / "adapter_loss.png")
+        _, held_out = data.split(cfg.val_fraction)
+        posture_figure(trained, held_out, run_dir / "plots" / "posture_prediction.png")
     return trained
 
 
@@ -146,9 +159,11 @@ def train_policy(
     *,
     resume: bool = False,
     progress: bool = True,
+    events: RunEvents = NO_EVENTS,
 ) -> sac.TrainResult:
     """The policy: the oracle regression (`actor_init`), then SAC on the policy-observation env
-    of the run's arm (none when `sac.num_timesteps` is 0, the default)."""
+    of the run's arm (none when `sac.num_timesteps` is 0, the default); its numbers also as
+    TensorBoard `events`."""
     latent_env, sac_config = _sac_setup(config, adapter)
     folder = run_dir / "sac"
     has_checkpoint = (folder / "checkpoint.json").exists()
@@ -164,16 +179,20 @@ def train_policy(
         )
     actor_init = None
     if config.actor_init == "oracle_regression":
-        actor_init = _oracle_regression(config, run_dir, adapter, latent_env.unwrapped.config)
+        actor_init = _oracle_regression(
+            config, run_dir, adapter, latent_env.unwrapped.config, events
+        )
     result = sac.train(
         latent_env,
         sac_config,
         folder,
         resume=resume and has_checkpoint,
         progress=progress,
+        on_epoch=events.sac_row,
         actor_init=actor_init,
     )
-    if result.history:
+    events.sac(result.history)
+    if result.history and is_writer():
         plots.training_curve(result.history, run_dir / "plots" / "training_curve.png")
     return result
 
@@ -186,7 +205,7 @@ def _sac_setup(config: RunConfig, adapter: adapter_lib.Adapter):
     return latent_env, config.sac  # its seed is the run's (`RunConfig.seed`)
 
 
-def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_config):
+def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_config, events):
     """The `actor_init` of `sac.train` that regresses the actor on the oracle's u (in the
     env's `u_frame`, scaled by its `u_scale`) over the adapter's MBC samples, then
     `config.dagger_rounds` times over those plus the student's own states (DAgger: the current
@@ -237,7 +256,9 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                 f"held-out R^2 per u component {r2})",
                 flush=True,
             )
-        write_json(run_dir / "sac" / "warm_start.json", reports[-1] | {"rounds": reports})
+        if is_writer():
+            write_json(run_dir / "sac" / "warm_start.json", reports[-1] | {"rounds": reports})
+        events.regression(reports)
         return carry
 
     return init
@@ -250,8 +271,9 @@ def export(
     result: sac.TrainResult,
     out: str | pathlib.Path | None = None,
 ) -> pathlib.Path:
-    """The run's deployable artefacts in `out` (default `run_dir/export`)."""
-    return io.export(
+    """The run's deployable artefacts in `out` (default `run_dir/export`), written by process 0;
+    every process returns once they are on disk."""
+    out = io.export(
         run_dir / "export" if out is None else out,
         adapter_config=adapter.config,
         policy=result.policy,
@@ -269,11 +291,13 @@ def export(
             "policy_input": config.policy_input,
         },
     )
+    barrier("export written")  # the other processes read it next (the evaluation)
+    return out
 
 
 def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[CellResult]:
     """The evaluation protocol on the run's arm; writes `eval.md` and prints the table."""
-    return _evaluate_table(
+    return evaluate_table(
         [config.arm],
         list(config.eval_controllers),
         task=config.task,
@@ -285,31 +309,6 @@ def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[C
         out=run_dir / "eval.md",
         csv=run_dir / EPISODES_FILE,
     )
-
-
-def _evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[CellResult]:
-    """`eval.evaluate`, printing the table row by row, writing it to `out` (markdown) and every
-    episode to `csv` (`eval.write_episodes_csv`). A line above the table names a native engine."""
-    engine = (kwargs.get("overrides") or {}).get("engine", "mjx")
-    preface = [] if engine == "mjx" else [f"physics: {engine} MuJoCo C (engine={engine!r})", ""]
-    print("\n".join([*preface, TABLE_HEADER]), flush=True)
-
-    def show(cell: CellResult) -> None:
-        print(table_row(cell), flush=True)
-
-    cells = evaluate(arms, controllers, on_result=show, **kwargs)
-    paired = paired_rows(cells)
-    tasks = [TASK_HEADER, *map(task_row, cells)]
-    print("\n" + "\n".join(tasks), flush=True)
-    if paired:
-        print("\n" + "\n".join([PAIRED_HEADER, *paired]), flush=True)
-    if out is not None:
-        lines = [*preface, TABLE_HEADER, *map(table_row, cells), "", *tasks]
-        lines += ["", PAIRED_HEADER, *paired] if paired else []
-        pathlib.Path(out).write_text("\n".join(lines) + "\n")
-    if csv is not None:
-        print(f"per-episode rows: {write_episodes_csv(csv, cells)}", flush=True)
-    return cells
 
 
 def export_run(run_dir: str | pathlib.Path, out: str | pathlib.Path | None = None) -> pathlib.Path:
@@ -346,7 +345,8 @@ def transfer_arm(
     data = adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress)
     config = dataclasses.replace(artefacts.adapter_config, seed=seed)
     encoder, history = adapter_lib.transfer(data, artefacts.decoder, config, progress=progress)
-    io.add_encoder(export_dir, name, encoder, arm, replace=True)
+    if is_writer():
+        io.add_encoder(export_dir, name, encoder, arm, replace=True)
     print(
         f"transfer: {name} encoder from {len(data):,} samples ({data.env_steps:,} env steps, "
         f"{data.seconds:.0f} s) trained in {history['seconds']:.0f} s; held-out NLL "
@@ -377,7 +377,7 @@ def evaluate_export(
     `steps` per episode (default: the task's episode length); prints the table (and writes it
     to `out`, and one row per episode to `csv`)."""
     artefacts, arms, overrides = export_cells(export_dir, arms, controllers, task, env)
-    return _evaluate_table(
+    return evaluate_table(
         arms,
         list(controllers),
         task=task,

@@ -33,6 +33,7 @@ from dpc_mjx.robots.assemble import arm_prefix
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.rotations import roll_pitch_yaw
+from dpc_mjx.writer import is_writer
 
 BACKENDS = {  # MUJOCO_GL value -> what to install when it is missing
     "osmesa": "Debian's libosmesa6 (`make render-deps`, or `apt-get install libosmesa6` as root)",
@@ -235,6 +236,7 @@ def render_rollout(
             frames.append(renderer.frame(q, push, text))
         columns.append(np.stack(frames))
     renderer.close()
-    path = write_video(np.concatenate(columns, axis=2), out)
-    print(f"render: {path} ({len(columns[0])} frames, {path.stat().st_size / 1e6:.1f} MB)")
+    if is_writer():  # process 0 of a run of several
+        path = write_video(np.concatenate(columns, axis=2), out)
+        print(f"render: {path} ({len(columns[0])} frames, {path.stat().st_size / 1e6:.1f} MB)")
     return falls

@@ -28,6 +28,7 @@ from dpc_mjx.run.eval import (
     paired_rows,
     write_episodes_csv,
 )
+from dpc_mjx.writer import is_writer
 
 HEADER = (
     "| arm | controller | engine | fall rate [95% CI] | mean return [95% CI] | roll RMS (rad) "
@@ -103,7 +104,7 @@ def sim2sim(
         )
     paired = engine_rows(cells)
     print("\n" + "\n".join([PAIRED_HEADER, *paired]), flush=True)
-    if out is not None:
+    if out is not None and is_writer():
         table = [
             row(e, c) for pair in zip(cells["mjx"], cells["native"]) for e, c in zip(ENGINES, pair)
         ]

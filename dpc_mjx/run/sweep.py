@@ -35,6 +35,7 @@ from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.run.eval import CONTROLLERS, CellResult, cell_result, write_episodes_csv
 from dpc_mjx.run.plots import sweep_heatmaps
 from dpc_mjx.stats import paired_diff_ci
+from dpc_mjx.writer import is_writer
 
 # One row per (grid point, controller) of the sweep's CSV; `*_minus_mbc` are paired differences
 # with MBC on the same episodes (empty for MBC itself, or without MBC in the sweep).
@@ -198,7 +199,7 @@ def sweep(
         ]
     result = SweepResult(uppers, masses, cells, seconds)
     _print_summary(result)
-    if out is not None:
+    if out is not None and is_writer():
         for name, path in result.write(out).items():
             print(f"{name}: {path}")
     return result

@@ -39,6 +39,7 @@ from dpc_mjx.progress import bar
 from dpc_mjx.sac import checkpoint, log
 from dpc_mjx.sac.config import SacConfig
 from dpc_mjx.sac.trainer import BestPolicy, Carry, Trainer, TrainingState, make_trainer
+from dpc_mjx.writer import barrier, is_writer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +66,8 @@ def train(
     calls). With `run_dir`, every epoch appends to `sac_log.csv` and rewrites the checkpoint there;
     `resume=True` continues from that checkpoint (same config but `num_timesteps` required).
     `actor_init(trainer, carry) -> carry` changes the starting point of a new run (e.g.
-    `warm_start.regress_actor`); with evaluations on, the starting policy is scored as epoch 0."""
+    `warm_start.regress_actor`); with evaluations on, the starting policy is scored as epoch 0.
+    In a run of several processes only process 0 writes the log and checkpoints there."""
     trainer = _trainer_for(env, config)
     config = trainer.config
     run_dir = pathlib.Path(run_dir) if run_dir is not None else None
@@ -77,12 +79,14 @@ def train(
     meta = _meta(trainer)
     if resume:
         carry, history = checkpoint.restore(run_dir, carry, meta)
+        barrier("sac restored")  # every process read the checkpoint before process 0 writes one
     elif actor_init is not None:
         carry = actor_init(trainer, carry)
     start_epoch = int(carry.epoch)
     env_state = trainer.reset(jax.random.fold_in(carry.key, start_epoch))
-    if run_dir is not None:
-        log.rewrite(run_dir, history)
+    log_dir = run_dir if is_writer() else None  # where the log and checkpoints are written
+    if log_dir is not None:
+        log.rewrite(log_dir, history)
     total = config.epochs
     if start_epoch < total:
         epoch_fn = trainer.compiled("epoch", carry, env_state)
@@ -91,7 +95,7 @@ def train(
     if config.eval_every and start_epoch < total:
         baseline = zero_action_baseline(trainer, carry, eval_key)
         if start_epoch == 0:  # the starting policy, a candidate for the best like any other
-            carry = _evaluate_start(trainer, carry, eval_key, baseline, history, run_dir)
+            carry = _evaluate_start(trainer, carry, eval_key, baseline, history, log_dir)
     t0 = time.perf_counter()
     with bar(total * config.env_steps_per_epoch, "sac", "step", progress and total > 0) as pb:
         pb.update(start_epoch * config.env_steps_per_epoch)
@@ -106,9 +110,9 @@ def train(
                 carry = _evaluate(trainer, carry, row, eval_key)
                 row.update({f"eval_mbc_{k}": v for k, v in baseline.items()})
             history.append(row)
-            if run_dir is not None:
-                log.append(run_dir, row)
-                checkpoint.save(run_dir, carry, meta, history)
+            if log_dir is not None:
+                log.append(log_dir, row)
+                checkpoint.save(log_dir, carry, meta, history)
             if on_epoch is not None:
                 on_epoch(row)
             pb.set_postfix(ret=f"{row['mean_return']:.1f}", fall=f"{row['fall_rate']:.2f}")
