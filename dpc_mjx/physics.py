@@ -27,7 +27,7 @@ names it), comes back as NaN, so the env's NaN guard ends that episode as it doe
 forward, as `mj_forward`, checks and resets nothing.
 
 JAX's persistent compilation cache never stores a native-engine program: jax 0.9.2 refuses to
-write any executable that holds host callbacks (`jax._src.compiler._cache_write`), so these
+write any executable that holds host callbacks (`_cache_write` in its compiler module), so these
 programs compile afresh in every process.
 """
 
