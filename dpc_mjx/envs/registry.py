@@ -126,7 +126,7 @@ def task_name(name: str) -> str:
 
 def _task(name: str) -> Task:
     """The task `name`, by its full name ("a1_arm/reaching") or its short one ("reaching")."""
-    task = TASKS.get(name) or TASKS.get(f"{ROBOT}/{name}")
+    task = TASKS.get(task_name(name))
     if task is None:
         short = sorted(n.split("/", 1)[1] for n in TASKS)
         raise DpcError(f"Unknown task {name!r}; known tasks: {short} (or {known_tasks()}).")
