@@ -10,6 +10,13 @@ from brax.envs.base import Wrapper
 # a program to take a handful of steps (compile time dominates the test run), never for timing.
 FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
+# The physics of the envs in tests that do not test MJX itself (issue 26: "tests that do not test
+# MJX itself use the faster path"): MuJoCo C through `mujoco.batch` (`dpc_mjx/physics.py`). A
+# carrying env's reset + step, batch 2, FAST_COMPILE, measured side by side on 2 cores: 33 s of
+# compile native against 119 s under MJX. MJX is tested by test_mjx, test_objects,
+# test_controller, test_eval_regression, test_sweep, test_physics and test_devices.
+ENGINE = "native"
+
 
 _JIT = jax.jit
 

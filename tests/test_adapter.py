@@ -6,6 +6,7 @@ import dataclasses
 import jax
 import numpy as np
 import pytest
+from helpers import ENGINE
 
 import dpc_mjx
 from dpc_mjx import DpcError, adapter
@@ -21,7 +22,7 @@ _MIN_GAIN = 0.2  # nats per sample the adapter must beat the constant predictor 
 
 @pytest.fixture(scope="module")
 def env():
-    return dpc_mjx.make(DEFAULT_TASK, arm="regular", controller="mbc")
+    return dpc_mjx.make(DEFAULT_TASK, arm="regular", controller="mbc", engine=ENGINE)
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +112,7 @@ def test_dagger_data_are_the_students_states_labelled_by_the_oracle(data):
     """`collect` with a policy on a 'policy' env (DAgger): the episodes start as MBC's, then the
     student's u (here a constant 30 N down) moves the robot to other states, and each row keeps
     the oracle's u measured in the state the student visited."""
-    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", controller="dpc")
+    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", controller="dpc", engine=ENGINE)
     n = _ENVS * 8
 
     def student(obs, key):

@@ -147,7 +147,7 @@ def _sac(kind: str) -> dict:
     if kind == "sac-toy":
         env, config = ToyEnv(), SacConfig(**SAC_TOY)
     else:  # tests/test_sac.py's env and config (3 epochs of 32 actor steps x 8 envs)
-        env, config = reaching_latent_env()[1], _CONFIG
+        env, config = reaching_latent_env("mjx")[1], _CONFIG
     trainer = make_trainer(env, config)
     carry = trainer.init(jax.random.PRNGKey(config.seed))
     epoch = trainer.compiled("epoch", carry, trainer.reset(jax.random.PRNGKey(0)))

@@ -7,7 +7,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
-from helpers import FAST_COMPILE, CountTraces, recorded_compiles
+from helpers import ENGINE, FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
@@ -43,7 +43,7 @@ def _row(tree, i):
 @pytest.fixture(scope="module")
 def regular():
     """The regular arm behind the training wrappers, jitted once; three steps taken."""
-    env = dpc_mjx.make(_TASK, arm="regular")
+    env = dpc_mjx.make(_TASK, arm="regular", engine=ENGINE)
     counted = CountTraces(env)
     wrapped = wrap_for_training(counted, episode_length=100)
     reset = jax.jit(wrapped.reset, compiler_options=FAST_COMPILE)
@@ -58,7 +58,7 @@ def regular():
 @pytest.fixture(scope="module", params=["none", "double"])
 def plain(request):
     """Other variants, unwrapped: jit(vmap(reset)) and jit(vmap(step)), two steps."""
-    env = dpc_mjx.make(_TASK, arm=request.param)
+    env = dpc_mjx.make(_TASK, arm=request.param, engine=ENGINE)
     reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)
     step = jax.jit(jax.vmap(env.step), compiler_options=FAST_COMPILE)
     s = reset(_keys(1))

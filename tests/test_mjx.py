@@ -1,5 +1,7 @@
 """The variants in MJX: finite stepping, standing, agreement with MuJoCo C, batched params."""
 
+import functools
+
 import jax
 import jax.numpy as jp
 import mujoco
@@ -28,9 +30,19 @@ _BATCHED_CALLS = 6  # x 50 steps = 1.2 s
 _G = 9.81
 
 
-# test-all only: regular's structure (longer, heavier), stepped in test_envs (none), or URDF arms
-# whose models tests/test_assets_offline.py builds and steps in MuJoCo C (so100, z1)
-_BREADTH = ("none", "longer", "heavier", "so100", "z1")
+# test-all only: regular's structure (longer, heavier, pusher: one plate instead of the gripper),
+# no arm (none), or URDF arms whose models tests/test_assets_offline.py builds and steps in
+# MuJoCo C (so100, z1). The default run stands `regular` and `double` (two arms) in MJX.
+_BREADTH = ("none", "longer", "heavier", "pusher", "so100", "z1")
+
+
+@functools.cache
+def _on_servos(variant: str):
+    """(model with leg servos, its MJX model, jit(vmap) of _CHUNK MJX steps): one compile per
+    variant, shared by the standing run and the comparison with MuJoCo C."""
+    model = with_leg_servos(build(variant))
+    mx = sim.put_model(model)
+    return model, mx, sim.make_rollout(mx, _CHUNK)
 
 
 @pytest.fixture(
@@ -41,12 +53,10 @@ _BREADTH = ("none", "longer", "heavier", "so100", "z1")
 )
 def standing_run(request):
     """Per variant: batched MJX states after one chunk and after 2 s of standing on servos."""
-    model = with_leg_servos(build(request.param))
-    mx = sim.put_model(model)
+    model, mx, rollout = _on_servos(request.param)
     data = sim.batched_data(
         mx, perturbed_home(model, _BATCH, seed=0), np.tile(home_ctrl(model), (_BATCH, 1))
     )
-    rollout = sim.make_rollout(mx, _CHUNK)
     first = rollout(data)
     last = first
     for _ in range(round(_STAND_SECONDS / model.opt.timestep / _CHUNK) - 1):
@@ -69,15 +79,15 @@ def test_standing_robot_does_not_fall_in_mjx(standing_run):
 
 
 def test_mjx_agrees_with_mujoco_c():
-    model = with_leg_servos(build("regular"))
-    qpos = perturbed_home(model, 1, seed=1)
+    """100 steps from a perturbed home pose (the standing run's compiled chunk, row 0)."""
+    model, mx, rollout = _on_servos("regular")
+    qpos = perturbed_home(model, _BATCH, seed=1)
     ctrl = home_ctrl(model)
     data = mujoco.MjData(model)
     data.qpos[:], data.ctrl[:] = qpos[0], ctrl
-    for _ in range(100):
+    for _ in range(2 * _CHUNK):
         mujoco.mj_step(model, data)
-    mx = sim.put_model(model)
-    dx = sim.make_rollout(mx, 100)(sim.batched_data(mx, qpos, ctrl[None]))
+    dx = rollout(rollout(sim.batched_data(mx, qpos, np.tile(ctrl, (_BATCH, 1)))))
     assert float(dx.qpos[0, 2]) == pytest.approx(data.qpos[2], abs=_MJX_C_HEIGHT_TOL)
     np.testing.assert_allclose(np.asarray(dx.qpos[0, 3:7]), data.qpos[3:7], atol=_MJX_C_QUAT_TOL)
 

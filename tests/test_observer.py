@@ -10,9 +10,10 @@ check the estimate against the applied wrench plus this term, and bound the term
 
 import jax
 import jax.numpy as jp
+import mujoco
 import numpy as np
 import pytest
-from helpers import FAST_COMPILE
+from helpers import ENGINE, FAST_COMPILE
 
 import dpc_mjx
 from dpc_mjx import DpcError, sim
@@ -130,10 +131,24 @@ def _reader(idx):
     return jax.jit(jax.vmap(lambda d: read_state(idx, d)))
 
 
-def _legs_term(read, idx, data, stance) -> np.ndarray:
-    """(B, 6) [N, N·m] about the A1 COM: the stance legs' weight not carried by tau = J^T f."""
+def _bias_in_c(model, data) -> np.ndarray:
+    """(B, nv) qfrc_bias (N, N·m: gravity, Coriolis) of each env's qpos, qvel, from MuJoCo C's
+    mj_forward (the native engine does not hand qfrc_bias back; the env reads none of it)."""
+    one = mujoco.MjData(model)
+    out = []
+    for qpos, qvel in zip(np.asarray(data.qpos), np.asarray(data.qvel), strict=True):
+        one.qpos[:], one.qvel[:] = qpos, qvel
+        mujoco.mj_forward(model, one)
+        out.append(one.qfrc_bias.copy())
+    return np.stack(out)
+
+
+def _legs_term(read, idx, data, stance, qfrc_bias=None) -> np.ndarray:
+    """(B, 6) [N, N·m] about the A1 COM: the stance legs' weight not carried by tau = J^T f.
+    `qfrc_bias` (B, nv): MJX's `data.qfrc_bias` unless given."""
     s = jax.device_get(read(data))
-    bias = np.asarray(data.qfrc_bias)[:, idx.leg_dof]  # (B, 4, 3) N·m on the leg joints
+    qfrc_bias = np.asarray(data.qfrc_bias if qfrc_bias is None else qfrc_bias)
+    bias = qfrc_bias[:, idx.leg_dof]  # (B, 4, 3) N·m on the leg joints
     jac_t = np.swapaxes(np.asarray(s.foot_jac), -1, -2)  # (B, 4, joints, xyz)
     df = np.linalg.solve(jac_t, bias[..., None])[..., 0] * np.asarray(stance)[..., None]
     lever = np.asarray(s.foot_pos) - np.asarray(s.com_pos)[:, None]
@@ -207,6 +222,7 @@ def test_env_observer_follows_the_oracles_vertical_force():
         DEFAULT_TASK,
         arm="regular",
         controller="observer",
+        engine=ENGINE,
         gait="stand",
         push_force=(0.0, 0.0),
         sensor_noise=0.0,
@@ -228,7 +244,8 @@ def test_env_observer_follows_the_oracles_vertical_force():
         s = jax.device_get(state)
         assert np.all(np.isfinite(s.info["ctrl"].observer.estimate)) and not np.any(s.done)
         if i >= _ENV_SETTLE_STEPS:
-            legs = _legs_term(read, idx, s.pipeline_state, s.info["ctrl"].stance)
+            bias = _bias_in_c(env.model, s.pipeline_state)
+            legs = _legs_term(read, idx, s.pipeline_state, s.info["ctrl"].stance, bias)
             u_oracle = s.info["privileged"][:, :6]
             gaps.append(s.info["ctrl"].observer.estimate[:, 2] - u_oracle[:, 2] - legs[:, 2])
     assert np.abs(gaps).max() < _ENV_FZ_TOL, np.round(gaps, 2)

@@ -10,7 +10,7 @@ import jax
 import mujoco
 import numpy as np
 import pytest
-from helpers import fast_jit
+from helpers import ENGINE, fast_jit
 
 from dpc_mjx import DpcError, io
 from dpc_mjx.control.static_balance import static_balance
@@ -296,20 +296,22 @@ def test_arm_arguments_take_variants_files_and_descriptions(urdf, tmp_path):
 
 
 def test_a_new_urdf_arm_goes_through_transfer_and_evaluation(monkeypatch, urdf, tmp_path, capsys):
+    """The whole path a user takes: `dpc-mjx transfer --arm my_arm.urdf` (data collection, here
+    in MuJoCo C, `--env engine=native`; an encoder against the frozen decoder) then `dpc-mjx eval
+    --arms my_arm.urdf`."""
     monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: a few steps of each program
-    """The whole path a user takes: `dpc-mjx transfer --arm my_arm.urdf` (MJX data collection,
-    an encoder against the frozen decoder) then `dpc-mjx eval --arms my_arm.urdf`."""
     export = tmp_path / "export"
     shutil.copytree(SHIPPED, export)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        history = transfer_arm(export, str(urdf), samples=128, n_envs=8, progress=False)
+        on = {"engine": ENGINE}
+        history = transfer_arm(export, str(urdf), samples=128, n_envs=8, progress=False, env=on)
         assert np.isfinite(min(history["val_nll"]))
         art = io.load(export)
         assert set(art.encoders) - set(io.load(SHIPPED).encoders) == {"my_arm"}
         assert art.arm_spec("my_arm") == UrdfArm(str(urdf.resolve()))
         (cell,) = evaluate_export(
-            export, arms=[str(urdf)], controllers=["dpc"], episodes=2, steps=10
+            export, arms=[str(urdf)], controllers=["dpc"], episodes=2, steps=10, env=on
         )
     assert (cell.arm, cell.controller) == ("my_arm", "dpc")
     assert np.all(np.isfinite(cell.per_episode["return"])) and cell.nan_resets == 0

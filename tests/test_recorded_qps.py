@@ -1,4 +1,5 @@
-"""Balance QPs recorded from real controller states in MJX, solved by our solver vs OSQP."""
+"""Balance QPs recorded from real controller states (the robot simulated in MuJoCo C, the native
+engine), solved by our solver vs OSQP."""
 
 import jax
 import jax.numpy as jp
@@ -6,12 +7,12 @@ import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
-from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.control import balance, gait, qp
 from dpc_mjx.control.closed_loop import init_loop
 from dpc_mjx.control.controller import make_controller
+from dpc_mjx.physics import NativePhysics
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import perturbed_home
 
@@ -26,6 +27,7 @@ def recorded():
     """(n, ...) P, q, G, h of the balance QPs a trotting `regular` robot solved, with random u."""
     model = build("regular")
     mx = sim.put_model(model)
+    physics = NativePhysics(model)
     ctl = make_controller(model, gait_=gait.trot())
     data = sim.batched_data(
         mx, perturbed_home(model, _BATCH, seed=7), np.tile(model.key_ctrl[0], (_BATCH, 1))
@@ -46,7 +48,7 @@ def recorded():
             cs, d = carry
             prob = ctl.balance_qp(ctl.plan(cs, d, command), uu)
             cs, ctrl = ctl.step(cs, d, command, uu)
-            return (cs, mjx.step(mx, d.replace(ctrl=ctrl))), (prob.P, prob.q, prob.G, prob.h)
+            return (cs, physics.step(d.replace(ctrl=ctrl))), (prob.P, prob.q, prob.G, prob.h)
 
         return jax.lax.scan(tick, (cs, d), None, length=_TICKS)[1]
 

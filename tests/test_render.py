@@ -4,7 +4,7 @@ import imageio_ffmpeg
 import jax
 import numpy as np
 import pytest
-from helpers import fast_jit
+from helpers import ENGINE, fast_jit
 from PIL import Image
 
 from dpc_mjx import DpcError
@@ -18,7 +18,8 @@ def test_render_writes_a_playable_mp4_of_the_episode(monkeypatch, tmp_path, caps
     monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: a few steps of each program
     out = tmp_path / "clip.mp4"
     args = ["render", "--out", str(out), "--seconds", str(_SECONDS), "--width", str(_W)]
-    assert cli.main([*args, "--height", str(_H), "--controller", "mbc"]) == 0
+    args = [*args, "--height", str(_H), "--controller", "mbc", "--env", f"engine={ENGINE}"]
+    assert cli.main(args) == 0
     reader = imageio_ffmpeg.read_frames(str(out))
     meta = next(reader)
     frames = np.stack([np.frombuffer(f, np.uint8).reshape(_H, _W, 3) for f in reader])

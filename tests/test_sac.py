@@ -10,7 +10,7 @@ import pytest
 from brax.training.acme import running_statistics
 from brax.training.agents.sac import networks as sac_networks
 from flax import linen
-from helpers import CountTraces
+from helpers import ENGINE, CountTraces, fast_jit
 
 import dpc_mjx
 from dpc_mjx import DpcError
@@ -54,10 +54,10 @@ class _Killed(Exception):
     pass
 
 
-def reaching_latent_env():
+def reaching_latent_env(engine: str = ENGINE):
     """The reaching env (regular arm, 100-step episodes: short evaluations) and the same env seen
-    through an untrained encoder, `[s_body, z]` (tests/test_devices.py runs it sharded)."""
-    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", episode_length=100)
+    through an untrained encoder, `[s_body, z]` (tests/test_devices.py runs it sharded, on MJX)."""
+    env = dpc_mjx.make(DEFAULT_TASK, arm="regular", episode_length=100, engine=engine)
     config = AdapterConfig()
     n_in = env.obs_layout.encoder_size  # [s_body, s_arm, p_arm]
     params = encoder_module(config).init(jax.random.PRNGKey(0), jp.zeros((1, n_in)))
@@ -92,8 +92,9 @@ def test_latent_env_shows_the_policy_body_state_and_z(latent_env):
         LatentObsWrapper(env, AdapterConfig(), wrong)
 
 
-def test_sac_trains_resumes_after_a_kill_and_traces_the_env_once(latent_env, tmp_path):
+def test_sac_trains_resumes_after_a_kill_and_traces_the_env_once(latent_env, tmp_path, monkeypatch):
     """With the asymmetric critic (the paper recipe's; `critic_privileged`)."""
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: 3 epochs of 256 env steps
     _, wrapped = latent_env
     counted = CountTraces(wrapped)
     config = dataclasses.replace(_CONFIG, critic_privileged=True)

@@ -7,7 +7,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
-from helpers import FAST_COMPILE
+from helpers import ENGINE, FAST_COMPILE
 
 import dpc_mjx
 from dpc_mjx.control import sensors
@@ -101,7 +101,7 @@ def resets():
     """A batch reset with the robot's sensors and one with exact sensors (same episodes)."""
     out = {}
     for noise in (1.0, 0.0):
-        env = dpc_mjx.make(DEFAULT_TASK, arm="regular", sensor_noise=noise)
+        env = dpc_mjx.make(DEFAULT_TASK, arm="regular", sensor_noise=noise, engine=ENGINE)
         reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)  # called once
         out[noise] = env, reset(jax.random.split(jax.random.PRNGKey(3), 16))
     return out

@@ -115,7 +115,7 @@ def test_an_objects_added_weight_loads_the_arm_by_m_g():
             push_force=(0.0, 0.0),
         )
         keys = jax.random.split(jax.random.PRNGKey(3), 2)
-        s = jax.vmap(env.reset)(keys)
+        s = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)(keys)
         action = jp.zeros((2, env.action_size))
 
         def run(s, _, env=env, action=action):

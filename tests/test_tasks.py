@@ -19,7 +19,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
-from helpers import FAST_COMPILE, CountTraces, recorded_compiles
+from helpers import ENGINE, FAST_COMPILE, CountTraces, recorded_compiles
 
 import dpc_mjx
 from dpc_mjx import DpcError
@@ -79,7 +79,7 @@ class _Wrapped:
 
     def __init__(self, task: str):
         # no arm: the task's default; its nominal episode
-        self.env = dpc_mjx.make(f"a1_arm/{task}", **_NOMINAL, **_NOMINAL_TASK[task])
+        self.env = dpc_mjx.make(f"a1_arm/{task}", engine=ENGINE, **_NOMINAL, **_NOMINAL_TASK[task])
         self.counted = CountTraces(self.env)
         wrapped = wrap_for_training(self.counted)
         options = None if task == "carrying" else FAST_COMPILE  # carrying runs 450 steps

@@ -86,7 +86,8 @@ def _train_adapter(args: argparse.Namespace) -> None:
 def _transfer(args: argparse.Namespace) -> None:
     from dpc_mjx.run.pipeline import transfer_arm  # noqa: PLC0415 (subcommand handler)
 
-    transfer_arm(args.export, args.arm, **given(args, ("samples", "task", "seed")))
+    options = given(args, ("samples", "task", "seed"))
+    transfer_arm(args.export, args.arm, **options, env=parse_sets(args.env))
 
 
 def _eval(args: argparse.Namespace) -> None:
@@ -191,6 +192,8 @@ def _training_commands(sub) -> None:
     p.add_argument("--samples", type=int, default=30_000)
     p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--seed", type=int, default=0)
+    env = "env options over the export's, e.g. engine=native (collect in MuJoCo C)"
+    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
     p.set_defaults(handler=_transfer)
 
 

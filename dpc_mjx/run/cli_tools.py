@@ -50,6 +50,7 @@ def _render(args: argparse.Namespace) -> None:
         episodes=args.episodes,
         width=args.width,
         height=args.height,
+        env=parse_sets(args.env),
     )
 
 
@@ -130,6 +131,8 @@ def tool_commands(sub) -> None:
     )
     p.add_argument("--width", type=int, default=480)
     p.add_argument("--height", type=int, default=360)
+    env = "env options over the export's (engine=native: MuJoCo C)"
+    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
     p.set_defaults(handler=_render)
 
     p = sub.add_parser("view", help="MuJoCo's viewer: a controller live, pushed with the mouse")

@@ -330,17 +330,20 @@ def transfer_arm(
     seed: int = 0,
     n_envs: int = 64,
     progress: bool = True,
+    env: dict | None = None,
 ) -> dict:
     """Paper §III-C: collect `samples` random-motion transitions of a new `arm` (MBC), train its
     encoder against the export's frozen decoder, and add it to the export under the arm's name
     (`robots.arm_name`: `my_arm` for my_arm.urdf). `arm`: a variant name, the path of an arm file
     (.urdf, MJCF .xml) or description (.json; `robots.read_arm_description`), a `UrdfArm` or an
-    `ArmSpec`. Returns the encoder's training history."""
+    `ArmSpec`. `env`: env options over the export's, as for `evaluate_export` (e.g.
+    `{"engine": "native"}`: collect in MuJoCo C). Returns the encoder's training history."""
     if isinstance(arm, str):
         arm = arm_argument(arm)
     name = arm_name(arm)
     artefacts = io.load(export_dir)
-    env = make(task, arm=arm, controller=Controller.MBC, **env_overrides(artefacts, task))
+    options = {**env_overrides(artefacts, task), **(env or {})}
+    env = make(task, arm=arm, controller=Controller.MBC, **options)
     print(f"transfer: collecting {samples:,} samples ({name}, MBC)", flush=True)
     data = adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress)
     config = dataclasses.replace(artefacts.adapter_config, seed=seed)

@@ -204,13 +204,15 @@ def render_rollout(
     episodes: int | None = None,
     width: int = 480,
     height: int = 360,
+    env: dict | None = None,
 ) -> dict[str, int | None]:
     """Render episode `episode` of `seed` (of a batch of `episodes`, see `record_episode`) on
     `task` under each controller ('mbc', 'observer', 'oracle', 'dpc': the export's policy and the
     arm's encoder), side by side and labelled, into
     `out` (.mp4 or .gif). Every controller runs under the export's env options (its policy frame
-    and sensor model; its disturbances on the task it was trained on), as `dpc-mjx eval` does.
-    Returns the env step of each controller's fall (None if it did not fall)."""
+    and sensor model; its disturbances on the task it was trained on), as `dpc-mjx eval` does,
+    with `env` over them (e.g. `{"engine": "native"}`). Returns the env step of each
+    controller's fall (None if it did not fall)."""
     if not controllers:
         raise DpcError(f"Render which controllers? Got none; use {[c.value for c in Controller]}.")
     controllers = [c.value for c in Controller.parse_all(controllers)]  # plain names, labels
@@ -219,15 +221,16 @@ def render_rollout(
     art = io.load(export or SHIPPED)
     arm_spec = arm_argument(arm) if isinstance(arm, str) else arm
     columns, falls, renderer = [], {}, None
+    options = {**env_overrides(art, task), **(env or {})}
     for controller in controllers:
-        env = make(task, arm=arm_spec, controller=controller, **env_overrides(art, task))
+        task_env = make(task, arm=arm_spec, controller=controller, **options)
         dpc = controller == Controller.DPC
         policy = art.dpc_policy(arm_name(arm_spec)) if dpc else zero_policy
         print(f"render: {controller}, {seconds} s of episode {episode} (seed {seed})", flush=True)
-        qpos, pushes, done = record_episode(env, seconds, seed, episode, policy, episodes)
+        qpos, pushes, done = record_episode(task_env, seconds, seed, episode, policy, episodes)
         fell = int(np.argmax(done)) if done.any() else None
         falls[controller] = fell
-        renderer = renderer or FrameRenderer(env.model, width, height)
+        renderer = renderer or FrameRenderer(task_env.model, width, height)
         frames = []
         for t, (q, push) in enumerate(zip(qpos, pushes, strict=True)):
             text = f"{controller.upper()}  {t / FPS:.2f} s"
