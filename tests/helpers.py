@@ -11,10 +11,11 @@ from brax.envs.base import Wrapper
 FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
 # The physics of the envs in tests that do not test MJX itself (issue 26: "tests that do not test
-# MJX itself use the faster path"): MuJoCo C through `mujoco.batch` (`dpc_mjx/physics.py`). A
-# carrying env's reset + step, batch 2, FAST_COMPILE, measured side by side on 2 cores: 33 s of
-# compile native against 119 s under MJX. MJX is tested by test_mjx, test_objects,
-# test_controller, test_eval_regression, test_sweep, test_physics and test_devices.
+# MJX itself use the faster path"): MuJoCo C through `mujoco.batch` (`dpc_mjx/physics.py`), whose
+# env programs compile about 3x faster (experiments/bench_limit.py in docs/benchmarks.md: a
+# 10-step chunk, batch 64, 37 s native against 103 s under MJX). MJX keeps its own tests:
+# test_mjx, test_objects, test_controller, test_eval_regression, test_sweep, test_physics,
+# test_devices.
 ENGINE = "native"
 
 

@@ -1,4 +1,6 @@
-"""The low-level controller in MJX, judged by what it achieves in simulation (small batches)."""
+"""The low-level controller, judged by what it achieves in simulation (small batches; MuJoCo C
+through the native engine, `tests/helpers.ENGINE`: the controller in MJX is in every MJX env of
+test_eval_regression, test_sweep and test_objects)."""
 
 import jax
 import jax.numpy as jp
@@ -9,6 +11,7 @@ from dpc_mjx import DpcError, sim
 from dpc_mjx.control import gait
 from dpc_mjx.control.closed_loop import init_loop, make_chunk, summarize
 from dpc_mjx.control.controller import make_controller
+from dpc_mjx.physics import NativePhysics
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import perturbed_home
 from dpc_mjx.rotations import roll_pitch_yaw
@@ -38,7 +41,8 @@ def standing():
     model = build("none")
     controller = make_controller(model, gait_=gait.stand())
     mx, ls = _start(model, controller)
-    return model, controller, ls, make_chunk(mx, controller, _TICKS, kind="given")
+    chunk = make_chunk(mx, controller, _TICKS, kind="given", physics=NativePhysics(model))
+    return model, controller, ls, chunk
 
 
 def _run(chunk, ls, seconds, command=(0, 0, 0), wrench=np.zeros(6), u=np.zeros(6)):
@@ -83,7 +87,7 @@ def test_trot_tracks_forward_speed_and_yaw_rate(variant):
     model = build(variant)
     controller = make_controller(model, gait_=gait.trot())
     mx, ls0 = _start(model, controller, seed=3)
-    chunk = make_chunk(mx, controller, _TICKS, kind="mbc")
+    chunk = make_chunk(mx, controller, _TICKS, kind="mbc", physics=NativePhysics(model))
     for command in ((0.3, 0.0, 0.0), (0.0, 0.0, 0.5)):
         ls = _run(chunk, ls0, 4.0, command=command)
         r = summarize(ls.metrics)

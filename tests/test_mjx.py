@@ -30,10 +30,11 @@ _BATCHED_CALLS = 6  # x 50 steps = 1.2 s
 _G = 9.81
 
 
-# test-all only: regular's structure (longer, heavier, pusher: one plate instead of the gripper),
-# no arm (none), or URDF arms whose models tests/test_assets_offline.py builds and steps in
-# MuJoCo C (so100, z1). The default run stands `regular` and `double` (two arms) in MJX.
-_BREADTH = ("none", "longer", "heavier", "pusher", "so100", "z1")
+# test-all only: regular's structure (longer, heavier, pusher: one plate instead of the gripper;
+# double: two of regular's arms), no arm (none), or URDF arms whose models
+# tests/test_assets_offline.py builds and steps in MuJoCo C (so100, z1). The default run stands
+# `regular` in MJX.
+_BREADTH = ("double", "none", "longer", "heavier", "pusher", "so100", "z1")
 
 
 @functools.cache

@@ -1,10 +1,12 @@
 """The momentum disturbance observer (`control/observer.py`): its equation on synthetic motion, and
-in MJX against a known trunk wrench (the bench) and against the oracle's u (the env).
+in simulation (MuJoCo C, the native engine: `tests/helpers.ENGINE`) against a known trunk wrench
+(the bench) and against the oracle's u (the env).
 
 The observer estimates every wrench on the A1 that its model does not explain. On the bare A1 at
 rest that is, besides an applied wrench, the legs' weight that the torques tau = J^T f do not
 carry (the feet push harder than the QP asked): `_legs_term` computes it from the data (for each
-stance foot f_actual - f_commanded = J^-T qfrc_bias[leg], the static leg equation), and the tests
+stance foot f_actual - f_commanded = J^-T qfrc_bias[leg], the static leg equation; qfrc_bias from
+MuJoCo C's mj_forward on the state), and the tests
 check the estimate against the applied wrench plus this term, and bound the term itself.
 """
 
@@ -22,6 +24,7 @@ from dpc_mjx.control.closed_loop import init_loop, make_chunk
 from dpc_mjx.control.controller import make_controller
 from dpc_mjx.control.state import BodyState, read_state
 from dpc_mjx.envs import DEFAULT_TASK
+from dpc_mjx.physics import NativePhysics
 from dpc_mjx.robots import build
 from dpc_mjx.robots.a1 import FOOT_RADIUS
 from dpc_mjx.robots.standing import perturbed_home
@@ -143,12 +146,11 @@ def _bias_in_c(model, data) -> np.ndarray:
     return np.stack(out)
 
 
-def _legs_term(read, idx, data, stance, qfrc_bias=None) -> np.ndarray:
-    """(B, 6) [N, N·m] about the A1 COM: the stance legs' weight not carried by tau = J^T f.
-    `qfrc_bias` (B, nv): MJX's `data.qfrc_bias` unless given."""
+def _legs_term(read, idx, data, stance, qfrc_bias) -> np.ndarray:
+    """(B, 6) [N, N·m] about the A1 COM: the stance legs' weight not carried by tau = J^T f;
+    `qfrc_bias` (B, nv) from `_bias_in_c`."""
     s = jax.device_get(read(data))
-    qfrc_bias = np.asarray(data.qfrc_bias if qfrc_bias is None else qfrc_bias)
-    bias = qfrc_bias[:, idx.leg_dof]  # (B, 4, 3) N·m on the leg joints
+    bias = np.asarray(qfrc_bias)[:, idx.leg_dof]  # (B, 4, 3) N·m on the leg joints
     jac_t = np.swapaxes(np.asarray(s.foot_jac), -1, -2)  # (B, 4, joints, xyz)
     df = np.linalg.solve(jac_t, bias[..., None])[..., 0] * np.asarray(stance)[..., None]
     lever = np.asarray(s.foot_pos) - np.asarray(s.com_pos)[:, None]
@@ -166,7 +168,7 @@ def bench():
     qpos = perturbed_home(model, _BATCH, seed=0)
     data = sim.batched_data(mx, qpos, np.tile(model.key_ctrl[0], (_BATCH, 1)))
     ls0 = init_loop(controller, data)
-    chunk = make_chunk(mx, controller, _TICKS, kind="observer")
+    chunk = make_chunk(mx, controller, _TICKS, kind="observer", physics=NativePhysics(model))
     idx = controller.idx
     read = _reader(idx)
 
@@ -184,7 +186,7 @@ def bench():
         return (
             np.asarray(ls.ctrl.observer.estimate),
             known,
-            _legs_term(read, idx, d, ls.ctrl.stance),
+            _legs_term(read, idx, d, ls.ctrl.stance, _bias_in_c(model, d)),
         )
 
     return settle

@@ -1,5 +1,5 @@
-"""The low-level controller's own test bench: the controller alone on MJX physics, with
-locomotion metrics.
+"""The low-level controller's own test bench: the controller alone on MJX physics (or MuJoCo C's,
+`physics=NativePhysics(model)`), with locomotion metrics.
 
 This is not a second environment. Envs (`dpc_mjx.envs`, stepped by `dpc_mjx.envs.rollout`) are
 what policies, evaluation and data collection use: they add the policy rate (50 Hz), the arm's
@@ -9,7 +9,7 @@ chosen per tick (mbc / oracle / observer / given). It measures what the controll
 itself (tests/test_controller.py, experiments/locomotion.py, experiments/bench_controller.py)
 and uses the library's one fall test (`control.state.has_fallen`).
 
-One tick = read state, pick u, controller step, one `mjx.step`. A chunk of ticks runs under
+One tick = read state, pick u, controller step, one physics step. A chunk of ticks runs under
 `lax.scan` inside one jitted, vmapped call.
 """
 
@@ -35,6 +35,7 @@ from dpc_mjx.control.controller import (
 from dpc_mjx.control.state import has_fallen, read_state
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
+from dpc_mjx.physics import MjxPhysics, NativePhysics
 from dpc_mjx.robots import build
 from dpc_mjx.robots.standing import perturbed_home
 from dpc_mjx.rotations import roll_pitch_yaw, to_yaw_frame
@@ -75,13 +76,16 @@ def make_chunk(
     n_ticks: int,
     kind: str = Controller.MBC,
     measure_after: float = 1.0,
+    physics: MjxPhysics | NativePhysics | None = None,
 ) -> Callable:
     """jit(vmap) of `n_ticks` ticks: `(loop_state, command (B,3), wrench (B,6), u (B,6)) -> state`.
 
     `kind`: 'mbc' (u = 0), 'oracle' (u = measured mount wrench + the known external wrench),
     'observer' (u = the momentum observer's estimate, `step(..., u=None)`) or 'given' (u as
     passed). `wrench` is an external [force N, torque N·m] applied to the trunk at
-    its COM (world frame) in the simulation. Metrics start after `measure_after` s.
+    its COM (world frame) in the simulation. Metrics start after `measure_after` s. `physics`:
+    what steps the simulation (default `MjxPhysics(mx)`; `dpc_mjx.physics.NativePhysics(model)`
+    for MuJoCo C).
     """
     if kind not in CONTROLLERS:
         raise DpcError(
@@ -90,6 +94,7 @@ def make_chunk(
         )
     idx, lay = controller.idx, controller.lay
     trunk = idx.trunk
+    physics = physics or MjxPhysics(mx)
 
     def tick(ls: LoopState, command, wrench, u_given):
         d = ls.data
@@ -107,7 +112,7 @@ def make_chunk(
             u = u_given
         cs, ctrl = controller.step(ls.ctrl, d, command, u)
         xfrc = d.xfrc_applied.at[trunk].set(wrench)
-        d = mjx.step(mx, d.replace(ctrl=ctrl, xfrc_applied=xfrc))
+        d = physics.step(d.replace(ctrl=ctrl, xfrc_applied=xfrc))
         m = _update_metrics(ls.metrics, d, cs.t, command, measure_after, trunk)
         return LoopState(cs, d, m)
 

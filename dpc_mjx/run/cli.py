@@ -147,7 +147,7 @@ def _default_csv(args: argparse.Namespace, prefix: str = "") -> pathlib.Path:
 def _demo(args: argparse.Namespace) -> None:
     from dpc_mjx.run.demo import run_demo  # noqa: PLC0415 (subcommand handler)
 
-    run_demo(quick=args.quick)
+    run_demo(quick=args.quick, engine=args.engine)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -171,6 +171,8 @@ def _training_commands(sub) -> None:
     """demo, train, train-adapter, transfer."""
     p = sub.add_parser("demo", help="a small run, then MBC / observer / DPC (minutes)")
     p.add_argument("--quick", action="store_true", help="an even smaller budget (smoke run)")
+    engine = "physics: native (MuJoCo C; the default on a CPU) or mjx (the default on a GPU)"
+    p.add_argument("--engine", choices=("native", "mjx"), help=engine)
     p.set_defaults(handler=_demo)
 
     p = sub.add_parser("train", help="the whole pipeline into a run folder")
