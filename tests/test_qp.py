@@ -330,19 +330,21 @@ def test_vmap_matches_single_calls(random_problems):
 def test_nested_vmap_and_shared_arguments(random_problems):
     """vmap of vmap is one batch; an argument shared by the batch (in_axes None) is broadcast."""
     P, q, G, h, _ = random_problems
-    args = [jp.asarray(a[:6], jp.float32) for a in (P, q, G, h)]
-    batch = jax.jit(jax.vmap(qp.solve))  # one compile for the flat and the tiled batch
-    flat = batch(*args)
-    nested = jax.jit(jax.vmap(jax.vmap(qp.solve)))(*(a.reshape((2, 3, *a.shape[1:])) for a in args))
-    assert nested.x.shape == (2, 3, N_VARS) and nested.valid.shape == (2, 3)
-    _assert_same_results(jax.tree.map(lambda a: a.reshape((6, *a.shape[2:])), nested), flat, 0.0)
+    args = [jp.asarray(a, jp.float32) for a in (P, q, G, h)]  # all N_PROBLEMS: _solve_batch's
+    flat = _solve_batch(*args)  # compiled for this shape by test_random_qps_match_osqp
+    half = N_PROBLEMS // 2
+    pairs = [a.reshape((2, half, *a.shape[1:])) for a in args]
+    nested = jax.jit(jax.vmap(jax.vmap(qp.solve)))(*pairs)
+    assert nested.x.shape == (2, half, N_VARS) and nested.valid.shape == (2, half)
+    whole = jax.tree.map(lambda a: a.reshape((N_PROBLEMS, *a.shape[2:])), nested)
+    _assert_same_results(whole, flat, 0.0)
 
     shared = jax.jit(jax.vmap(qp.solve, in_axes=(None, 0, None, 0)))(
         args[0][0], args[1], args[2][0], args[3]
     )
     tiled = [jp.broadcast_to(args[0][0], args[0].shape), args[1]]
     tiled += [jp.broadcast_to(args[2][0], args[2].shape), args[3]]
-    _assert_same_results(shared, batch(*tiled), 0.0)
+    _assert_same_results(shared, _solve_batch(*tiled), 0.0)
 
 
 def test_warm_started_scan_under_vmap(random_problems):

@@ -71,6 +71,7 @@ def test_the_sweep_writes_its_table_episodes_and_heatmaps(swept):
             assert f.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow  # a third MJX env compile (~2 min); the batched model's physics: test_mjx
 def test_a_grid_point_steps_as_the_arm_compiled_alone(swept):
     """Grid point (0.28 m, 0.1 kg) is the variant `longer`: its MBC episodes match `longer`'s own
     env on the same seed, and differ from `regular`'s by more than the tolerance."""
