@@ -55,7 +55,11 @@ def regular():
     return env, counted, step, action, states  # on the device, as a training loop has them
 
 
-@pytest.fixture(scope="module", params=["none", "double"])
+@pytest.fixture(
+    scope="module",
+    # test-all: an env compile each (~35 s); every task x arm also steps in tests/test_matrix.py
+    params=[pytest.param(arm, marks=pytest.mark.slow) for arm in ("none", "double")],
+)
 def plain(request):
     """Other variants, unwrapped: jit(vmap(reset)) and jit(vmap(step)), two steps."""
     env = dpc_mjx.make(_TASK, arm=request.param, engine=ENGINE)

@@ -20,9 +20,11 @@ import importlib.util
 import pathlib
 import re
 
+import jax
 import mujoco
 import numpy as np
 import pytest
+from helpers import fast_jit
 from test_sac import _CONFIG
 
 from dpc_mjx.deploy import Measurement
@@ -100,6 +102,7 @@ def test_quick_start_snippets(capsys):
 
 @pytest.mark.slow
 def test_training_pipeline_snippet_on_a_tiny_budget(tmp_path, monkeypatch):
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: a few steps of each program
     (code,) = [b for b in snippets() if PIPELINE in b]
     for readme, tiny in TINY.items():
         assert code.count(readme) == 1, f"the training snippet no longer holds {readme!r}"
