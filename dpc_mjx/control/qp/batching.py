@@ -69,9 +69,12 @@ def _batched_solver(cfg: QPSettings, st: _Structure):
     """f(*args with a leading batch axis) -> QPResult with that axis; a vmap of f is merged into
     the same batch axis (nested vmaps become one batch)."""
 
+    # jit: a process traces the kernel once per shape, not once per program that holds it
+    solve_many = jax.jit(lambda *args: _solve_many(args, cfg, st))
+
     @jax.custom_batching.custom_vmap
     def many(*args):
-        return _solve_many(args, cfg, st)
+        return solve_many(*args)
 
     @many.def_vmap
     def _many_vmap(axis_size, in_batched, *args):
@@ -88,9 +91,11 @@ def _batched_solver(cfg: QPSettings, st: _Structure):
 def _solver(cfg: QPSettings, st: _Structure):
     """f(*args of one problem) -> QPResult, whose vmap runs the batch-minor chunked kernel."""
 
+    run_kernel = jax.jit(lambda *args: _run_kernel(args, cfg, st))  # traced once per shape
+
     @jax.custom_batching.custom_vmap
     def one(*args):
-        return _run_kernel(args, cfg, st)
+        return run_kernel(*args)
 
     @one.def_vmap
     def _one_vmap(axis_size, in_batched, *args):
