@@ -206,7 +206,7 @@ def _step_parts(t: Timer, env, d, info, dist, keys, noise):
     def guard(d0, d, cs0, cs, obs, priv, sb, command):
         vel = jp.stack([sb[5], sb[6], observations.world_yaw_rate(sb)])
         r = rewards.total_reward(vel, command, sb[:2], jp.zeros(2))
-        fall = has_fallen(d.qpos[2], sb[:2])
+        fall = has_fallen(d.qpos[2], sb[:2], env.controller.fall_height)
         bad = outcome.is_bad(d, obs, priv, cs, r["r_total"], env.config.explode_speed)
         metrics = outcome.zero_if_bad(outcome.step_metrics(r, vel - command, sb, fall, bad), bad)
         keep = lambda new, old: jp.where(bad, old, new)  # noqa: E731

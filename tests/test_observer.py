@@ -68,7 +68,7 @@ def _estimates(com_vel, rot, ang_vel):
         )
 
     def tick(ob, i):
-        ob = observer.update(observer.ObserverConfig(), _MODEL, ob, body(i), zeros, _DT)
+        ob = observer.update(observer.ObserverConfig(), _MODEL, ob, body(i), zeros, _DT, 0.02)
         return ob, ob.estimate
 
     return jax.lax.scan(tick, observer.init(_MODEL, body(0)), jp.arange(com_vel.shape[0]))[1]

@@ -289,6 +289,6 @@ def test_the_controller_models_the_bare_a1_on_every_scene():
     bare = dpc_mjx.make(DEFAULT_TASK, arm="none").controller.idx
     for task, arm in (*_DEFAULTS.items(), ("carrying", "double")):
         idx = dpc_mjx.make(f"a1_arm/{task}", arm=arm).controller.idx
-        assert idx.a1_mass == pytest.approx(bare.a1_mass, rel=1e-9), task
+        assert idx.base_mass == pytest.approx(bare.base_mass, rel=1e-9), task
         np.testing.assert_allclose(idx.com_offset, bare.com_offset, atol=1e-9, err_msg=task)
-        np.testing.assert_allclose(idx.a1_inertia, bare.a1_inertia, atol=1e-9, err_msg=task)
+        np.testing.assert_allclose(idx.base_inertia, bare.base_inertia, atol=1e-9, err_msg=task)

@@ -113,7 +113,7 @@ def make_chunk(
         cs, ctrl = controller.step(ls.ctrl, d, command, u)
         xfrc = d.xfrc_applied.at[trunk].set(wrench)
         d = physics.step(d.replace(ctrl=ctrl, xfrc_applied=xfrc))
-        m = _update_metrics(ls.metrics, d, cs.t, command, measure_after, trunk)
+        m = _update_metrics(ls.metrics, d, cs.t, command, measure_after, controller)
         return LoopState(cs, d, m)
 
     def chunk(ls, command, wrench, u):
@@ -125,11 +125,12 @@ def make_chunk(
     return jax.jit(jax.vmap(chunk))
 
 
-def _update_metrics(m: LocoMetrics, d, t, command, measure_after, trunk) -> LocoMetrics:
+def _update_metrics(m: LocoMetrics, d, t, command, measure_after, ctl) -> LocoMetrics:
     rpy = roll_pitch_yaw(d.qpos[3:7])
     fwd, lat, _ = to_yaw_frame(d.qvel[0:3], rpy[2])  # m/s, yaw frame
-    yaw_rate = (d.xmat[trunk] @ d.qvel[3:6])[2]
-    fallen = m.fallen | has_fallen(d.qpos[2], rpy[:2]) | ~jp.all(jp.isfinite(d.qpos))
+    yaw_rate = (d.xmat[ctl.idx.trunk] @ d.qvel[3:6])[2]
+    fallen = has_fallen(d.qpos[2], rpy[:2], ctl.fall_height)
+    fallen = m.fallen | fallen | ~jp.all(jp.isfinite(d.qpos))
     w = ((t >= measure_after) & ~fallen).astype(jp.float32)
     return LocoMetrics(
         ticks=m.ticks + w,

@@ -27,8 +27,8 @@ from flax import struct
 
 from dpc_mjx.control import balance, gait, qp, sensors, swing
 from dpc_mjx.control import observer as observer_lib
+from dpc_mjx.control.base_scaling import base_scale, scaled_config
 from dpc_mjx.control.state import BodyState, StateIndex, read_state, state_index
-from dpc_mjx.robots.a1 import FOOT_RADIUS
 from dpc_mjx.robots.layout import Layout, layout, mount_wrench
 from dpc_mjx.rotations import rot_z, yaw_of
 
@@ -85,16 +85,17 @@ class LowLevelController:
     dt: float  # s, the control period (= physics step)
     config: ControllerConfig
     arm_home: jax.Array  # (n_arm_act,) servo targets of the home pose
+    fall_height: float  # m: the base's trunk below this has fallen (`state.has_fallen`)
 
     def init(self, d) -> ControllerState:
         s = read_state(self.idx, d)
-        zero = jp.zeros(balance.N_VARS)
-        warm = qp.solve(
+        # the warm start: zeros shaped like a solve's result (eval_shape: no solve in the reset)
+        warm = jax.eval_shape(
+            qp.solve,
             jp.eye(balance.N_VARS),
-            zero,
+            jp.zeros(balance.N_VARS),
             jp.zeros((balance.N_ROWS, balance.N_VARS)),
             jp.ones(balance.N_ROWS),
-            settings=qp.QPSettings(iterations=1),
         )
         return ControllerState(
             t=jp.zeros(()),
@@ -102,14 +103,16 @@ class LowLevelController:
             yaw_des=yaw_of(s.rot),
             swing_start=s.foot_pos,
             stance=jp.ones(4, bool),
-            qp=jax.tree.map(jp.zeros_like, warm),
+            qp=jax.tree.map(lambda a: jp.zeros(a.shape, a.dtype), warm),
             forces=jp.zeros((4, 3)),
             observer=observer_lib.init(self.config.balance, s),
         )
 
     def _observe(self, cs: ControllerState, s: BodyState) -> observer_lib.ObserverState:
         cfg = self.config
-        return observer_lib.update(cfg.observer, cfg.balance, cs.observer, s, cs.forces, self.dt)
+        return observer_lib.update(
+            cfg.observer, cfg.balance, cs.observer, s, cs.forces, self.dt, self.lay.foot_radius
+        )
 
     def plan(
         self, cs: ControllerState, d, command: jax.Array, noise: sensors.SensorNoise | None = None
@@ -132,7 +135,7 @@ class LowLevelController:
     def balance_qp(self, p: Plan, u: jax.Array) -> balance.BalanceQP:
         """The stance-force QP of this tick (eqs. 5-10) with the disturbance u = [f_a, tau_a]."""
         s = p.state
-        contact_points = s.foot_pos.at[:, 2].add(-FOOT_RADIUS)  # forces act at the ground
+        contact_points = s.foot_pos.at[:, 2].add(-self.lay.foot_radius)  # forces act at the ground
         return balance.build_balance_qp(
             self.config.balance,
             s.com_pos,
@@ -218,17 +221,23 @@ class LowLevelController:
 def make_controller(
     model: mujoco.MjModel, config: ControllerConfig | None = None, gait_: gait.Gait | None = None
 ) -> LowLevelController:
-    """A controller for a compiled variant. The balance model is the bare A1 (see module doc)."""
+    """A controller for a compiled variant. The balance model is the bare base (see module doc);
+    the default config is the A1's scaled to the base (`control.base_scaling`)."""
     lay = layout(model)
     idx = state_index(model, lay)
+    scale = base_scale(idx)
     if config is None:
-        params = balance.default_params(mass=idx.a1_mass, inertia=(1.0, 1.0, 1.0))
-        params = dataclasses.replace(params, inertia=jp.asarray(idx.a1_inertia, jp.float32))
-        config = ControllerConfig(balance=params, gait=gait_ or gait.trot())
+        a1_config = ControllerConfig(balance=balance.default_params(), gait=gait_ or gait.trot())
+        config = scaled_config(a1_config, scale, lay, idx)
     config.observer.validate(float(model.opt.timestep))
     arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)
     return LowLevelController(
-        idx=idx, lay=lay, dt=float(model.opt.timestep), config=config, arm_home=arm_home
+        idx=idx,
+        lay=lay,
+        dt=float(model.opt.timestep),
+        config=config,
+        arm_home=arm_home,
+        fall_height=scale.fall_height,
     )
 
 

@@ -71,7 +71,6 @@ from flax import struct
 from dpc_mjx.control.balance import GRAVITY, BalanceParams
 from dpc_mjx.control.state import BodyState
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.a1 import FOOT_RADIUS
 
 
 @struct.dataclass
@@ -119,10 +118,13 @@ def momentum(model: BalanceParams, s: BodyState) -> jax.Array:
     return jp.concatenate([model.mass * s.com_vel, inertia_w @ s.ang_vel])
 
 
-def known_wrench(model: BalanceParams, s: BodyState, forces: jax.Array) -> jax.Array:
-    """(6,) [sum f_i + m g_vec (N), sum (c_i - com) x f_i (N·m)]: the modelled wrench on the A1
-    for ground forces `forces` (4, 3) (N, world, on the feet) at the contact points of `s`."""
-    contact_points = s.foot_pos.at[:, 2].add(-FOOT_RADIUS)  # (4, 3) m, as the balance QP's
+def known_wrench(
+    model: BalanceParams, s: BodyState, forces: jax.Array, foot_radius: float
+) -> jax.Array:
+    """(6,) [sum f_i + m g_vec (N), sum (c_i - com) x f_i (N·m)]: the modelled wrench on the base
+    for ground forces `forces` (4, 3) (N, world, on the feet) at the contact points of `s`, a
+    foot's sphere centre `foot_radius` (m) above its contact point."""
+    contact_points = s.foot_pos.at[:, 2].add(-foot_radius)  # (4, 3) m, as the balance QP's
     weight = jp.array([0.0, 0.0, -GRAVITY]) * model.mass  # (3,) N
     force = jp.sum(forces, axis=0) + weight
     torque = jp.sum(jp.cross(contact_points - s.com_pos, forces), axis=0)
@@ -141,11 +143,13 @@ def update(
     s: BodyState,
     forces: jax.Array,
     dt: float,
+    foot_radius: float,
 ) -> ObserverState:
     """One tick: `s` the body state read now, `forces` (4, 3) the ground forces commanded at
-    the previous tick (N, world), `dt` (s) the tick. r_k = K (p_k - predicted_k), see module doc.
-    """
-    predicted = ob.predicted + (known_wrench(model, s, forces) + ob.estimate) * ob.elapsed
+    the previous tick (N, world), `dt` (s) the tick, `foot_radius` (m) the base's feet's.
+    r_k = K (p_k - predicted_k), see module doc."""
+    wrench = known_wrench(model, s, forces, foot_radius)
+    predicted = ob.predicted + (wrench + ob.estimate) * ob.elapsed
     estimate = config.gains() * (momentum(model, s) - predicted)
     return ObserverState(
         predicted=predicted, estimate=estimate, elapsed=jp.full((), dt, jp.float32)

@@ -14,7 +14,6 @@ import mujoco
 import numpy as np
 from flax import struct
 
-from dpc_mjx.robots import a1
 from dpc_mjx.robots.layout import Layout
 
 
@@ -39,13 +38,15 @@ class StateIndex:
     thighs: np.ndarray  # (4,) body ids
     leg_dof: np.ndarray  # (4, 3) dof addresses per leg
     chain_dof: np.ndarray  # (4, 9) root dofs 0..5 + the leg's 3 dofs
-    com_offset: np.ndarray  # (3,) A1 COM in the trunk frame at home, m
-    a1_mass: float  # kg, trunk + legs
-    a1_inertia: np.ndarray  # (3, 3) kg·m², about the A1 COM, trunk frame, at home
+    com_offset: np.ndarray  # (3,) the base's COM in the trunk frame at home, m
+    base_mass: float  # kg, trunk + legs
+    base_inertia: np.ndarray  # (3, 3) kg·m², about the base's COM, trunk frame, at home
+    home_height: float  # m, the trunk's origin above the floor at home
+    leg_length: float  # m, mean over legs of thigh joint -> knee joint -> foot centre at home
 
 
 def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
-    """Indices and the A1's (arm-free) rigid-body model at its home pose."""
+    """Indices and the base's (arm-free) rigid-body model at its home pose."""
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
     mujoco.mj_forward(model, data)
@@ -68,15 +69,21 @@ def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
     trunk = lay.trunk
     trunk_rot = data.xmat[trunk].reshape(3, 3)
     leg_dof = lay.leg_dof.reshape(4, 3)
+    anchors = data.xanchor[lay.leg_joints].reshape(4, 3, 3)  # (leg, hip/thigh/knee, xyz) m
+    feet = data.site_xpos[lay.foot_sites]  # (4, 3) m
+    thigh = np.linalg.norm(anchors[:, 2] - anchors[:, 1], axis=1)
+    shank = np.linalg.norm(feet - anchors[:, 2], axis=1)
     return StateIndex(
         trunk=trunk,
         feet=lay.foot_sites,
-        thighs=np.array([model.body(f"{leg}_thigh").id for leg in a1.LEGS]),
+        thighs=model.jnt_bodyid[lay.leg_joints[1::3]],  # the bodies the thigh joints move
         leg_dof=leg_dof,
         chain_dof=np.concatenate([np.tile(np.arange(6), (4, 1)), leg_dof], axis=1),
         com_offset=trunk_rot.T @ (com - data.xpos[trunk]),
-        a1_mass=mass,
-        a1_inertia=trunk_rot.T @ inertia @ trunk_rot,
+        base_mass=mass,
+        base_inertia=trunk_rot.T @ inertia @ trunk_rot,
+        home_height=float(model.key_qpos[0][model.jnt_qposadr[model.body_jntadr[trunk]] + 2]),
+        leg_length=float(np.mean(thigh + shank)),
     )
 
 
@@ -109,11 +116,11 @@ def read_state(idx: StateIndex, d) -> BodyState:
 
 
 # The fall test, the one used everywhere (env termination, the controller's test bench, demo).
-FALL_HEIGHT = 0.15  # m: a trunk below this has fallen
 FALL_TILT = 1.0  # rad of roll or pitch: fallen
 
 
-def has_fallen(trunk_height: jax.Array, roll_pitch: jax.Array) -> jax.Array:
-    """() bool: trunk height (m, world z) below `FALL_HEIGHT` or |roll| or |pitch| (rad,
+def has_fallen(trunk_height: jax.Array, roll_pitch: jax.Array, fall_height: float) -> jax.Array:
+    """() bool: trunk height (m, world z) below `fall_height` (the base's,
+    `control.base_scaling.BaseScale.fall_height`; the A1's 0.15 m) or |roll| or |pitch| (rad,
     `roll_pitch` (..., 2)) above `FALL_TILT`."""
-    return (trunk_height < FALL_HEIGHT) | jp.any(jp.abs(roll_pitch) > FALL_TILT, axis=-1)
+    return (trunk_height < fall_height) | jp.any(jp.abs(roll_pitch) > FALL_TILT, axis=-1)

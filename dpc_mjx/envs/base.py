@@ -39,10 +39,11 @@ Tasks customise the env through hooks, never by rewriting `step`:
     task_metrics(d, dist)   extra per-step metrics (scalars, the same keys at reset and step):
                             the task's success measures (`TASK_MEASURES` says how each is read)
 
-Fall: trunk height < 0.15 m or |roll| or |pitch| > 1 rad (`control.state.has_fallen`). A
-non-finite or exploded step (|qvel| > `explode_speed`) keeps the previous physics and controller
-state, returns obs = 0 and reward = 0 with done = 1 and is counted in `metrics['nan_resets']`;
-the auto-reset wrapper (`wrappers.wrap_for_training`) then resets that env alone.
+Fall: trunk height < 0.15 m (the A1's; scaled with a base's standing height) or |roll| or
+|pitch| > 1 rad (`control.state.has_fallen`). A non-finite or exploded step (|qvel| >
+`explode_speed`) keeps the previous physics and controller state, returns obs = 0 and reward = 0
+with done = 1 and is counted in `metrics['nan_resets']`; the auto-reset wrapper
+(`wrappers.wrap_for_training`) then resets that env alone.
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ from dpc_mjx.physics import make_physics
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.objects import prop_layout
-from dpc_mjx.robots.variants import Arm, RobotSpec
+from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 from dpc_mjx.rotations import wrench_to_world, yaw_of
 
 ACTION_SIZE = 6  # u = [f_a (3), tau_a (3)]
@@ -82,7 +83,8 @@ class DpcEnv(Env):
     def __init__(self, config: EnvConfig, arm: str | Arm | RobotSpec = "regular"):
         config.validate()
         self.config = config
-        self.model = self.build_model(arm)
+        arm = getattr(self, "DEFAULT_ARM", "regular") if arm is None else arm  # a task's default
+        self.model = self.build_model(on_base(resolve(arm), config.base))
         timestep = float(self.model.opt.timestep)
         n_sub = round(config.policy_dt / timestep)
         if n_sub < 1 or abs(n_sub * timestep - config.policy_dt) > 1e-9:
@@ -243,7 +245,7 @@ class DpcEnv(Env):
         sb = true_obs[self.obs_layout.s_body]  # the reward, the fall test and metrics: true
         vel = jp.stack([sb[5], sb[6], observations.world_yaw_rate(sb)])
         r = rewards.total_reward(vel, command, sb[:2], jp.zeros(2))  # desired roll = pitch = 0
-        fall = has_fallen(d.qpos[2], sb[:2])
+        fall = has_fallen(d.qpos[2], sb[:2], self.controller.fall_height)
         privileged = self._privileged(d, dist)
         bad = outcome.is_bad(d, obs, privileged, cs, r["r_total"], self.config.explode_speed)
         fall = fall & ~bad

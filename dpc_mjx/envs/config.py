@@ -83,6 +83,9 @@ class EnvConfig:
     # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device) or 'native' (MuJoCo C
     # on the same model, threads on the host: sim-to-sim, and the faster path on a CPU)
     engine: str = "mjx"
+    # The quadruped: a name of `robots.base_file.NAMED_BASES` ('a1', 'go1', 'go2', 'b1', 'b1-z1')
+    # or the path of its .urdf (or .json) file, read when the env is built (`robots.base_model`)
+    base: str = "a1"
 
     # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]]
     # (per axis x, y, z of `u_frame`; about the A1 COM). A number applies to all three axes.
@@ -205,6 +208,11 @@ class EnvConfig:
         _choice("gait", self.gait, GAITS)
         _choice("engine", self.engine, ENGINES)
         _choice("u_frame", self.u_frame, U_FRAMES)
+        if not isinstance(self.base, str) or not self.base:
+            raise DpcError(
+                f"base={self.base!r}: give a base's name (a1, go1, go2, b1, b1-z1) or the path "
+                "of its .urdf or .json file."
+            )
         _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
         _int("sensor_delay", self.sensor_delay, 0, 10)
         for name in ("max_force", "max_torque"):

@@ -19,6 +19,7 @@ builds the env; `scene_spec` / `build_scene` give a task's scene alone.
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -29,7 +30,8 @@ from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import carrying, lifting, pushing, reaching
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
+from dpc_mjx.robots.base_file import BaseSpec
+from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 
 ROBOT = "a1_arm"
 DEFAULT_TASK = "a1_arm/reaching"  # the training task: every run, evaluation and export's default
@@ -79,15 +81,27 @@ def default_arm(name: str) -> str:
     return _task(name).default_arm
 
 
-def make(name: str, arm: str | Arm | RobotSpec | None = None, **overrides: Any) -> DpcEnv:
+def make(
+    name: str,
+    arm: str | Arm | RobotSpec | None = None,
+    base: str | os.PathLike | BaseSpec | None = None,
+    **overrides: Any,
+) -> DpcEnv:
     """The unbatched env `name` (e.g. "a1_arm/reaching") with arm variant `arm` (a name of
     `dpc_mjx.robots.VARIANTS`, an ArmSpec/UrdfArm or a RobotSpec; None: the task's default arm,
-    `default_arm(name)`) and config `overrides`."""
+    `default_arm(name)`) on the quadruped `base` (a name of `robots.base_file.NAMED_BASES`, the
+    path of its .urdf or .json file, or a BaseSpec; None: the RobotSpec's, the A1) and config
+    `overrides`."""
     task = _task(name)
+    robot = resolve(task.default_arm if arm is None else arm)
+    if isinstance(base, BaseSpec):  # an object: the env builds this very spec
+        robot, base = dataclasses.replace(robot, base=base), str(base.path)
+    if base is not None:
+        overrides = {**overrides, "base": os.fspath(base)}
     config = task.default_config().replace(**overrides)
-    arm = task.default_arm if arm is None else arm
-    task.env_class.check_arm(resolve_arm(arm))  # a bad or unsuitable arm fails here
-    return task.env_class(config, arm)
+    robot = on_base(robot, config.base)
+    task.env_class.check_arm(resolve_arm(robot))  # a bad or unsuitable arm fails here
+    return task.env_class(config, robot)
 
 
 def resolve_arm(arm: str | Arm | RobotSpec) -> RobotSpec:

@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1
+from dpc_mjx.robots.base_model import VISUAL_GROUP_SITES
 from dpc_mjx.robots.mount import (
     ARM_ARMATURE,
     ARM_DAMPING,
@@ -261,7 +261,7 @@ def _add_gripper(gripper: mujoco.MjsBody, mass: float, rgba: list) -> mujoco.Mjs
         name=EE_SITE,
         pos=[PALM_LENGTH + FINGER_LENGTH, 0, 0],
         size=[0.01, 0, 0],
-        group=a1.VISUAL_GROUP_SITES,
+        group=VISUAL_GROUP_SITES,
     )
 
     finger = gripper.add_body(name="finger", pos=[PALM_LENGTH, 0.026, 0])
@@ -286,7 +286,7 @@ def _add_plate(gripper: mujoco.MjsBody, mass: float, rgba: list) -> None:
         name=EE_SITE,
         pos=[PLATE_OFFSET + 2 * PLATE_HALF[0], 0, 0],
         size=[0.01, 0, 0],
-        group=a1.VISUAL_GROUP_SITES,
+        group=VISUAL_GROUP_SITES,
     )
 
 

@@ -1,4 +1,4 @@
-"""Assemble a robot variant (A1 + arms) and its scene with `mujoco.MjSpec`, and compile it."""
+"""Assemble a robot variant (a base + arms) and its scene with `mujoco.MjSpec`, and compile it."""
 
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ import math
 import mujoco
 import numpy as np
 
-from dpc_mjx.robots import a1, arms
+from dpc_mjx.robots import a1, arms, base_model
+from dpc_mjx.robots.arms import Mount
+from dpc_mjx.robots.base_file import BaseSpec
 from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 HOME_KEY = "home"
@@ -24,23 +26,24 @@ def arm_prefix(i: int) -> str:
 
 
 def robot_spec(robot: str | Arm | RobotSpec) -> mujoco.MjSpec:
-    """The robot alone (no floor): A1, arms attached at their mounts, options, home keyframe."""
+    """The robot alone (no floor): base, arms attached at their mounts, options, home keyframe."""
     return assemble(resolve(robot))
 
 
 def assemble(robot: RobotSpec) -> mujoco.MjSpec:
     """`robot_spec` of a robot already resolved (not validated again: `resolve` checks a file
     arm's static balance on this spec)."""
-    spec = a1.a1_spec()
-    spec.modelname = f"a1_{robot.name}"
-    trunk = spec.body(a1.TRUNK)
+    base = base_model.as_base(robot.base)
+    spec = base_model.base_mjspec(base)
+    spec.modelname = f"{base.name}_{robot.name}"
+    trunk = spec.body(base.trunk)
     for i, arm in enumerate(robot.arms):
-        yaw = arm.mount.yaw
+        mount = mount_on(base, arm.mount)
         site = trunk.add_site(
             name=f"{arm_prefix(i)}mount_frame",
-            pos=list(arm.mount.pos),
-            quat=[math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)],
-            group=a1.VISUAL_GROUP_SITES,
+            pos=list(mount.pos),
+            quat=[math.cos(mount.yaw / 2), 0, 0, math.sin(mount.yaw / 2)],
+            group=base_model.VISUAL_GROUP_SITES,
         )
         spec.attach(arms.arm_spec(arm), prefix=arm_prefix(i), site=site)
 
@@ -51,7 +54,7 @@ def assemble(robot: RobotSpec) -> mujoco.MjSpec:
     spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
 
     model = spec.compile()
-    qpos, ctrl = _home(robot, model)
+    qpos, ctrl = _home(robot, base, model)
     spec.add_key(name=HOME_KEY, qpos=list(qpos), ctrl=list(ctrl))
     return spec
 
@@ -90,8 +93,8 @@ def add_scene(spec: mujoco.MjSpec) -> mujoco.MjSpec:
         type=mujoco.mjtGeom.mjGEOM_PLANE,
         size=[0, 0, 0.05],
         material="groundplane",
-        contype=a1.FLOOR_CONTYPE,
-        conaffinity=a1.FLOOR_CONAFFINITY,
+        contype=base_model.FLOOR_CONTYPE,
+        conaffinity=base_model.FLOOR_CONAFFINITY,
     )
     return spec
 
@@ -106,13 +109,27 @@ def build(robot: str | Arm | RobotSpec) -> mujoco.MjModel:
     return build_spec(robot).compile()
 
 
-def _home(robot: RobotSpec, model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+def mount_on(base: BaseSpec, mount: Mount) -> Mount:
+    """`mount` (written on the A1's trunk box, as the named variants' are) moved to the same
+    place of `base`'s trunk box: each coordinate scaled by the ratio of the boxes' half extents,
+    about the box's centre. On a base with the A1's box it is `mount` itself."""
+    half, center = base.trunk_half_extents, base.trunk_box_center
+    if half == a1.TRUNK_HALF_EXTENTS and not any(center):
+        return mount
+    pos = tuple(
+        c + p * h / h1 for c, p, h, h1 in zip(center, mount.pos, half, a1.TRUNK_HALF_EXTENTS)
+    )
+    return Mount(pos, mount.yaw)
+
+
+def _home(robot: RobotSpec, base: BaseSpec, model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     """Home qpos (nq,) and ctrl (nu,): standing legs, arms in their home pose as servo targets."""
-    joint_q = dict(zip(a1.LEG_JOINTS, a1.home_leg_qpos(), strict=True))
+    height, leg_q = base_model.home_pose(base)
+    joint_q = dict(zip(base.leg_joints, leg_q, strict=True))
     for i, arm in enumerate(robot.arms):
         joint_q.update(arms.home_qpos(arm, arm_prefix(i)))
     qpos = model.qpos0.copy()
-    qpos[:7] = [0, 0, a1.HOME_HEIGHT, 1, 0, 0, 0]
+    qpos[:7] = [0, 0, height, 1, 0, 0, 0]
     for name, q in joint_q.items():
         qpos[model.joint(name).qposadr[0]] = q
     ctrl = np.zeros(model.nu)

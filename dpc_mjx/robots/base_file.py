@@ -1,5 +1,4 @@
-"""A quadruped base read from its URDF file as a `BaseSpec` (issue 27, in progress: not yet used by
-the env, the controller or `robots.build`, which still build the A1 of `robots.a1`).
+"""A quadruped base read from its URDF file as a `BaseSpec` (`robots.base_model` builds it).
 
 `read_base(base)`: `base` is a named base (`NAMED_BASES`: a1, go1, go2, b1, and b1-z1, the B1
 carrying a Z1 whose arm `arm_urdf` splits off; their URDFs ship in `dpc_mjx/descriptions/`), the
@@ -205,14 +204,16 @@ def _locate(base) -> tuple[str, pathlib.Path, pathlib.Path | None, dict]:
         )
     if p.suffix.lower() == ".json":
         options = read_json(p, _JSON_KEYS)
-        name, path, _, _ = _locate(p.parent / str(options.pop("file")))
-        return name, path, None, options
+        name, path, mesh_dir, _ = _locate(p.parent / str(options.pop("file")))
+        return name, path, mesh_dir, options
     if p.suffix.lower() != ".urdf":
         raise DpcError(
             f"Base file {p} is not a URDF (.urdf) or a JSON (.json) naming one; convert the "
             "robot's description to URDF (xacro files: run `xacro` first)."
         )
-    return p.stem, p.resolve(), None, {}
+    named = [n for n in NAMED_BASES if base_file_path(n) == p.resolve()]  # a shipped file
+    mesh_dir = MESHES / named[0] if named else None
+    return (named[0] if named else p.stem), p.resolve(), mesh_dir, {}
 
 
 @functools.lru_cache(maxsize=16)

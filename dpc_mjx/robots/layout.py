@@ -1,6 +1,7 @@
 """Index layout of a compiled variant: where legs, arms, feet and sensors live in qpos/qvel/ctrl.
 
-Everything here is static (numpy ints), computed once from names, and safe to close over in jit.
+Everything here is static (numpy ints), computed once from the names `robots.base_model` gives
+every base's parts (whatever its file calls them), and safe to close over in jit.
 """
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1, arms
+from dpc_mjx.robots import arms, base_model
 from dpc_mjx.robots.assemble import arm_prefix
+from dpc_mjx.robots.base_file import LEGS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,15 +34,18 @@ class ArmLayout:
 
 @dataclasses.dataclass(frozen=True)
 class Layout:
-    """A compiled A1 variant's indices (see `layout`)."""
+    """A compiled variant's indices (see `layout`)."""
 
-    leg_qpos: np.ndarray  # (12,) in a1.LEG_JOINTS order
+    leg_joints: np.ndarray  # (12,) joint ids, legs in base_file.LEGS order, each hip, thigh, calf
+    leg_qpos: np.ndarray  # (12,) in leg_joints order
     leg_dof: np.ndarray  # (12,)
     leg_act: np.ndarray  # (12,) torque motors, N·m
     arms: tuple[ArmLayout, ...]
     trunk: int  # body id
     imu_site: int
     foot_sites: np.ndarray  # (4,) FR, FL, RR, RL foot sphere centres
+    foot_radius: float  # m, the feet's spheres' (the largest)
+    torque_limits: np.ndarray  # (12,) N·m, the leg motors' ranges, in leg_joints order
     sensor_adr: dict[str, int]  # trunk_quat, gyro, accelerometer, local_linvel
 
     @property
@@ -60,14 +65,20 @@ class Layout:
 def layout(model: mujoco.MjModel) -> Layout:
     """Indices of a model built by `dpc_mjx.robots.build`."""
     try:
-        leg_joints = [model.joint(n) for n in a1.LEG_JOINTS]
-        leg_act = [model.actuator(n.removesuffix("_joint")).id for n in a1.LEG_JOINTS]
-        feet = [model.site(n).id for n in a1.FOOT_SITES]
+        leg_act = [
+            model.actuator(base_model.actuator_name(place, part)).id
+            for place in LEGS
+            for part in base_model.LEG_PARTS
+        ]
+        leg_joints = [model.joint(model.actuator_trnid[a, 0]) for a in leg_act]
+        feet = [model.site(base_model.foot_name(place)).id for place in LEGS]
+        radius = max(model.geom(base_model.foot_name(place)).size[0] for place in LEGS)
         sensor_adr = {
             n: int(model.sensor(n).adr[0])
             for n in ("trunk_quat", "gyro", "accelerometer", "local_linvel")
         }
-        trunk, imu = model.body(a1.TRUNK).id, model.site(a1.IMU_SITE).id
+        trunk = int(model.joint(base_model.ROOT_JOINT).bodyid[0])
+        imu = model.site(base_model.IMU_SITE).id
     except KeyError as e:
         raise DpcError(f"This model was not built by dpc_mjx.robots.build: missing {e}.") from e
     arm_list = []
@@ -76,6 +87,7 @@ def layout(model: mujoco.MjModel) -> Layout:
         arm_list.append(_arm_layout(model, arm_prefix(i)))
         i += 1
     return Layout(
+        leg_joints=np.array([j.id for j in leg_joints]),
         leg_qpos=np.array([j.qposadr[0] for j in leg_joints]),
         leg_dof=np.array([j.dofadr[0] for j in leg_joints]),
         leg_act=np.array(leg_act),
@@ -83,6 +95,8 @@ def layout(model: mujoco.MjModel) -> Layout:
         trunk=trunk,
         imu_site=imu,
         foot_sites=np.array(feet),
+        foot_radius=float(radius),
+        torque_limits=model.actuator_ctrlrange[leg_act, 1].copy(),
         sensor_adr=sensor_adr,
     )
 

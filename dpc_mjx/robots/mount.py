@@ -15,6 +15,7 @@ import mujoco
 
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import a1
+from dpc_mjx.robots.base_model import VISUAL_GROUP_SITES
 
 MOUNT_SITE = "mount"
 EE_SITE = "ee"
@@ -56,7 +57,7 @@ class Servo:
 
 def add_mount_sensors(spec: mujoco.MjSpec, root: mujoco.MjsBody) -> None:
     """The mount site on the arm's `root` body, with its force and torque sensors."""
-    root.add_site(name=MOUNT_SITE, size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES)
+    root.add_site(name=MOUNT_SITE, size=[0.01, 0, 0], group=VISUAL_GROUP_SITES)
     for kind, name in (
         (mujoco.mjtSensor.mjSENS_FORCE, FORCE_SENSOR),
         (mujoco.mjtSensor.mjSENS_TORQUE, TORQUE_SENSOR),

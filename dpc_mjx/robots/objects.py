@@ -33,12 +33,12 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1, arms
+from dpc_mjx.robots import arms, base_model
 from dpc_mjx.robots.assemble import arm_prefix, build_spec
 from dpc_mjx.robots.variants import Arm, RobotSpec
 
 # Contact bits (see the table above).
-FLOOR_BIT, EE_BIT, TABLE_BIT = a1.FLOOR_CONTYPE, 2, 4
+FLOOR_BIT, EE_BIT, TABLE_BIT = base_model.FLOOR_CONTYPE, 2, 4
 BOX_CONTYPE, BOX_CONAFFINITY = EE_BIT, FLOOR_BIT | TABLE_BIT
 BALL_CONTYPE, BALL_CONAFFINITY = 0, FLOOR_BIT | TABLE_BIT
 TABLE_CONTYPE, TABLE_CONAFFINITY = TABLE_BIT, 0
@@ -149,7 +149,7 @@ def add_ball(
         condim=6,
         friction=list(BALL_FRICTION),
     )
-    body.add_site(name=name, size=[0.005, 0, 0], group=a1.VISUAL_GROUP_SITES)
+    body.add_site(name=name, size=[0.005, 0, 0], group=base_model.VISUAL_GROUP_SITES)
     return spec
 
 
@@ -202,7 +202,7 @@ def add_grasp_site(
         name=arm_prefix(arm) + "grasp",
         pos=list(np.asarray(ee.pos) + offset),
         size=[0.005, 0, 0],
-        group=a1.VISUAL_GROUP_SITES,
+        group=base_model.VISUAL_GROUP_SITES,
     )
     return spec
 

@@ -10,6 +10,7 @@ URDF unchanged.
 
 from __future__ import annotations
 
+import pathlib
 import xml.etree.ElementTree as ET
 
 import mujoco
@@ -19,14 +20,16 @@ from dpc_mjx import assets
 VISUAL_GROUP = 1  # geom group of the visual-only primitives
 
 
-def load_urdf(name: str, *, drop_links: tuple[str, ...] = ()) -> mujoco.MjSpec:
-    """The URDF `name` (see `assets.URDFS`) as a spec, meshes removed, static bodies not yet fused.
+def load_urdf(name: str | pathlib.Path, *, drop_links: tuple[str, ...] = ()) -> mujoco.MjSpec:
+    """The URDF `name` (see `assets.URDFS`, or a path) as a spec, meshes removed, static bodies not
+    yet fused.
 
     `drop_links` removes links (and the joints into or out of them) before loading; used to drop
     the URDF's dummy `base`/`world` link so the real root link can be given a free joint or be
     attached to another robot.
     """
-    root = ET.parse(assets.urdf_path(name)).getroot()
+    path = name if isinstance(name, pathlib.Path) else assets.urdf_path(name)
+    root = ET.parse(path).getroot()
     for link in root.findall("link"):
         strip_meshes(link)
         if link.get("name") in drop_links:

@@ -15,7 +15,8 @@ import numpy as np
 
 from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1, arm_file
+from dpc_mjx.robots import arm_file
+from dpc_mjx.robots.base_model import VISUAL_GROUP_SITES
 from dpc_mjx.robots.mount import (
     ARM_ARMATURE,
     ARM_DAMPING,
@@ -128,7 +129,7 @@ def urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
     root.fuse = 0  # keep the root body apart from the trunk: the mount sensors live in it
     add_mount_sensors(spec, root)
     spec.body(read.ee_body).add_site(
-        name=EE_SITE, pos=list(arm.offset), size=[0.01, 0, 0], group=a1.VISUAL_GROUP_SITES
+        name=EE_SITE, pos=list(arm.offset), size=[0.01, 0, 0], group=VISUAL_GROUP_SITES
     )
     if not arm.is_file or not read.has_geometry:
         # Capsules between successive joint origins, so the arm is visible without its meshes.

@@ -1,4 +1,6 @@
-"""Named robot variants: the A1 with zero, one or two arms (the paper's Table I and more).
+"""Named robot variants: a base (the A1 by default) with zero, one or two arms (the paper's
+Table I and more). The arms' mounts are written on the A1's trunk box; on another base
+`robots.assemble` moves them to the same place of its trunk box.
 
 none: bare A1. regular/longer/heavier/double: Table I. pusher: the pushing task's heavier, flat
 arm (0.5 kg plate end effector, no gripper). so100/z1: URDF arms for transfer.
@@ -12,6 +14,7 @@ import math
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import a1
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
+from dpc_mjx.robots.base_file import BaseSpec
 
 MAX_ARMS = 2
 MIN_MOUNT_SEPARATION = 0.08  # m between two arm bases (their plates are 0.04 m in radius)
@@ -21,10 +24,12 @@ Arm = ArmSpec | UrdfArm
 
 @dataclasses.dataclass(frozen=True)
 class RobotSpec:
-    """The A1 and the arms mounted on it (structure: changing it means a new compile)."""
+    """A base and the arms mounted on it (structure: changing it means a new compile). `base`:
+    a named base, the path of its file, or a `BaseSpec` (`robots.base_model.as_base`)."""
 
     name: str
     arms: tuple[Arm, ...] = ()
+    base: str | BaseSpec = "a1"
 
     def validate(self) -> None:
         if not isinstance(self.arms, tuple):
@@ -33,8 +38,7 @@ class RobotSpec:
             )
         if len(self.arms) > MAX_ARMS:
             raise DpcError(
-                f"{self.name}: {len(self.arms)} arms given, the A1 trunk carries at most "
-                f"{MAX_ARMS}."
+                f"{self.name}: {len(self.arms)} arms given, a trunk carries at most {MAX_ARMS}."
             )
         for i, arm in enumerate(self.arms):
             if not isinstance(arm, (ArmSpec, UrdfArm)):
@@ -96,6 +100,12 @@ def resolve(robot: str | Arm | RobotSpec) -> RobotSpec:
         )
     spec.validate()
     return spec
+
+
+def on_base(robot: RobotSpec, base: str | BaseSpec) -> RobotSpec:
+    """`robot` on `base` (a name, a file path or a `BaseSpec`), unless it carries a `BaseSpec`
+    object of its own (then that one: `make(..., base=spec)` builds it so)."""
+    return robot if isinstance(robot.base, BaseSpec) else dataclasses.replace(robot, base=base)
 
 
 def arm_name(robot: str | Arm | RobotSpec) -> str:

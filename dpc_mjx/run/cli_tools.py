@@ -1,4 +1,4 @@
-"""The `dpc-mjx` tool subcommands (export, onnx, bench, render, view, variants, mjcf) and the
+"""The `dpc-mjx` tool subcommands (export, onnx, bench, render, view, variants, mjcf, base) and the
 option parsing every subcommand shares (`--set` / `--env NAME=VALUE` lists, given options);
 `dpc_mjx.run.cli` builds the whole command line from these."""
 
@@ -94,8 +94,20 @@ def _mjcf(args: argparse.Namespace) -> None:
         print(path)
 
 
+def _base(args: argparse.Namespace) -> None:
+    from dpc_mjx.robots.base_describe import describe, description  # noqa: PLC0415 (handler)
+    from dpc_mjx.robots.base_file import read_base  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.serialization import write_json  # noqa: PLC0415 (subcommand handler)
+
+    spec = read_base(args.file)
+    print(describe(spec))
+    if args.out:
+        write_json(args.out, description(spec, args.out))
+        print(f"wrote {args.out}; correct it there, then check it: dpc-mjx base {args.out}")
+
+
 def tool_commands(sub) -> None:
-    """export, bench, render, view, variants, mjcf."""
+    """export, bench, render, view, variants, mjcf, base."""
     p = sub.add_parser("export", help="export a run's adapter and policy")
     p.add_argument("--run", required=True)
     p.add_argument("--out", help="export folder (default: run/export)")
@@ -154,3 +166,12 @@ def tool_commands(sub) -> None:
     p = sub.add_parser("mjcf", help="write every variant's robot and scene MJCF")
     p.add_argument("out_dir", nargs="?", default="mjcf")
     p.set_defaults(handler=_mjcf)
+    _base_command(sub)
+
+
+def _base_command(sub) -> None:
+    """base (issue 27): a quadruped base's file as read, and its JSON to correct."""
+    p = sub.add_parser("base", help="what is inferred of a quadruped base's URDF, as a JSON")
+    p.add_argument("file", help="a named base (a1 go1 go2 b1 b1-z1), a .urdf or a base .json")
+    p.add_argument("--out", help="write the JSON that reproduces it here, e.g. my_dog.json")
+    p.set_defaults(handler=_base)

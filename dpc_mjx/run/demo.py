@@ -13,6 +13,7 @@ import jax
 import numpy as np
 
 from dpc_mjx import sim
+from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.state import has_fallen
 from dpc_mjx.controllers import Controller
 from dpc_mjx.robots import VARIANTS, build, resolve
@@ -45,7 +46,8 @@ def stand_variant(name: str, batch: int = 16, seconds: float = 1.0, chunk: int =
     n_calls = max(1, round(seconds / model.opt.timestep / chunk) - 1)
     compile_s, call_s, data = time_calls(rollout, data, n_calls)
     arm_bodies = np.concatenate([a.bodies for a in lay.arms]) if lay.arms else np.zeros(0, int)
-    fallen = has_fallen(data.qpos[:, 2], roll_pitch_yaw(data.qpos[:, 3:7])[:, :2])
+    rpy = roll_pitch_yaw(data.qpos[:, 3:7])
+    fallen = has_fallen(data.qpos[:, 2], rpy[:, :2], model_scale(model).fall_height)
     return DemoRow(
         variant=name,
         arm_dof=int(lay.arm_dof.size),

@@ -27,7 +27,7 @@ from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.envs.rollout import Policy, record_episodes, zero_policy
 from dpc_mjx.errors import DpcError
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
-from dpc_mjx.robots import a1
+from dpc_mjx.robots import layout
 from dpc_mjx.robots.arms import EE_SITE
 from dpc_mjx.robots.assemble import arm_prefix
 from dpc_mjx.robots.spec_json import arm_argument
@@ -93,7 +93,7 @@ class FrameRenderer:
         self.option = mujoco.MjvOption()
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-        self.camera.trackbodyid = self.model.body(a1.TRUNK).id
+        self.camera.trackbodyid = layout(self.model).trunk
         self.camera.distance, self.camera.azimuth, self.camera.elevation = 1.4, 135.0, -20.0
         self._ee_sites = []
         i = 0

@@ -1,0 +1,113 @@
+"""Any quadruped: the named bases, and a file the library does not name, build, stand and trot.
+
+The check (issue 27): the reaching task with pushes off and the command fixed at 0.3 m/s forward,
+the arm's reaching motion as the task draws it, under MBC: no falls, and the forward speed's RMS
+error to the command within SPEED_TOL. The default suite runs it for each named base on a few
+envs for 2 s (native engine, the CPU path); `make test-all` runs the whole matrix (every named
+base, no arm and `regular`, MJX and native, 64 envs for 10 s; `experiments/base_trot.py` prints
+the same cells as a table). The A1's own numbers are checked exactly: its model and results must
+not move (tests/test_eval_regression.py and the recorded tests guard them too).
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dpc_mjx import DpcError, assets, make
+from dpc_mjx.control.base_scaling import model_scale
+from dpc_mjx.control.controller import make_controller
+from dpc_mjx.envs.rollout import run_episodes
+from dpc_mjx.robots import VARIANTS, build, layout
+from dpc_mjx.robots.assemble import mount_on
+from dpc_mjx.robots.base_file import LEGS, read_base
+
+CHECK = {
+    "controller": "mbc",
+    "push_force": (0.0, 0.0),
+    "command_vx": (0.3, 0.3),
+    "command_vy": (0.0, 0.0),
+    "command_yaw": (0.0, 0.0),
+}
+SPEED_TOL = 0.1  # m/s: RMS of the forward speed's error to the 0.3 m/s command
+SEED = 7  # chose nothing
+_EXACT = 1e-12
+
+
+def _trot(base, arm: str, engine: str, envs: int, seconds: float) -> dict:
+    env = make("reaching", arm=arm, base=base, engine=engine, **CHECK)
+    steps = round(seconds / env.config.policy_dt)
+    return run_episodes(env, envs, steps, seed=SEED)
+
+
+def _assert_trots(ep: dict, what: str) -> None:
+    assert np.sum(ep["fell"]) == 0, f"{what}: {int(np.sum(ep['fell']))} falls"
+    rms = np.sqrt(np.sum(ep["vx_sq_err"]) / np.sum(ep["measured"]))
+    assert rms < SPEED_TOL, f"{what}: forward speed RMS error {rms:.3f} m/s"
+
+
+@pytest.mark.parametrize("base", ["go1", "go2", "b1"])
+def test_named_base_trots_under_mbc(base):
+    _assert_trots(_trot(base, "none", "native", envs=4, seconds=2.0), base)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("engine", ["native", "mjx"])
+@pytest.mark.parametrize("arm", ["none", "regular"])
+@pytest.mark.parametrize("base", ["a1", "go1", "go2", "b1"])
+def test_base_matrix_trots_64_envs_for_10_s(base, arm, engine):
+    _assert_trots(_trot(base, arm, engine, envs=64, seconds=10.0), f"{base}/{arm}/{engine}")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not assets.wheel_installed(), reason="needs the example-robot-data wheel")
+def test_a_quadruped_file_the_library_does_not_name_trots():
+    path = assets.wheel_urdf("laikago_description/urdf/laikago.urdf")  # by path, no JSON
+    _assert_trots(_trot(str(path), "regular", "native", envs=16, seconds=10.0), "laikago")
+
+
+def test_the_a1_keeps_its_names_and_numbers():
+    model = build("regular")
+    lay = layout(model)
+    names = [model.joint(j).name for j in lay.leg_joints]
+    assert names == [f"{leg}_{part}_joint" for leg in LEGS for part in ("hip", "thigh", "calf")]
+    assert model.body(lay.trunk).name == "trunk"
+    assert lay.foot_radius == 0.02
+    np.testing.assert_array_equal(lay.torque_limits, np.full(12, 33.5))
+    ctl = make_controller(model)
+    assert model_scale(model) == model_scale(build("none"))  # the arm is not the base's
+    assert (model_scale(model).mass, model_scale(model).length) == (1.0, 1.0)
+    assert (ctl.fall_height, ctl.config.body_height, ctl.config.swing_height) == (0.15, 0.26, 0.08)
+    assert (ctl.config.raibert_k, ctl.config.max_pos_error) == (0.03, 0.05)
+    np.testing.assert_array_equal(np.asarray(ctl.config.swing_kp), [500.0] * 3)
+    np.testing.assert_array_equal(np.asarray(ctl.config.balance.f_max), 180.0)
+
+
+def test_another_base_is_scaled_by_the_stated_rules():
+    model = build(dataclasses.replace(VARIANTS["none"], base="b1"))
+    scale, ctl = model_scale(model), make_controller(model)
+    assert scale.mass == pytest.approx(55.689 / 13.741, rel=1e-4)  # the files' trunk + legs
+    assert scale.length == pytest.approx(0.7 / 0.4, rel=1e-3)
+    assert ctl.fall_height == pytest.approx(0.15 * scale.height, abs=_EXACT)
+    kp = 500.0 * scale.mass / scale.length
+    np.testing.assert_allclose(np.asarray(ctl.config.swing_kp), [kp] * 3, rtol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(ctl.config.torque_limit), read_base("b1").torque_limits, rtol=1e-6
+    )
+    assert float(ctl.config.balance.mass) == pytest.approx(55.689, abs=1e-3)
+
+
+def test_an_arm_mount_moves_to_the_same_place_of_another_trunk():
+    go2 = read_base("go2")  # its box comes from its collision mesh, off the trunk's origin
+    mount = VARIANTS["regular"].arms[0].mount
+    moved = mount_on(go2, mount)
+    top = go2.trunk_box_center[2] + go2.trunk_half_extents[2]
+    assert moved.pos[2] == pytest.approx(top, abs=_EXACT)  # on the top face, as on the A1
+    assert mount_on(read_base("a1"), mount) is mount
+
+
+def test_a_base_the_library_cannot_find_is_refused_before_anything_compiles():
+    with pytest.raises(DpcError, match="does not exist"):
+        make("reaching", arm="none", base="no_such_dog.urdf")
+    with pytest.raises(DpcError, match="base="):
+        make("reaching", arm="none", base="")
