@@ -18,9 +18,11 @@ from dpc_mjx import DpcError, assets, make
 from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.controller import make_controller
 from dpc_mjx.envs.rollout import run_episodes
+from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.robots import VARIANTS, build, layout
 from dpc_mjx.robots.assemble import mount_on
 from dpc_mjx.robots.base_file import LEGS, read_base
+from dpc_mjx.run import cli
 
 CHECK = {
     "controller": "mbc",
@@ -111,3 +113,16 @@ def test_a_base_the_library_cannot_find_is_refused_before_anything_compiles():
         make("reaching", arm="none", base="no_such_dog.urdf")
     with pytest.raises(DpcError, match="base="):
         make("reaching", arm="none", base="")
+
+
+def test_an_export_is_not_evaluated_on_another_base_than_its_own():
+    with pytest.raises(DpcError, match="trained on the base 'a1'"):
+        export_cells(SHIPPED, None, ["mbc", "dpc"], "reaching", {"base": "go2"})
+    assert export_cells(SHIPPED, None, ["mbc"], "reaching", {"base": "go2"})[2]["base"] == "go2"
+
+
+def test_the_commands_take_base(capsys):
+    assert cli.main(["eval", "--base", "go2", "--controllers", "mbc", "dpc"]) != 0  # no compile
+    assert "trained on the base 'a1'" in capsys.readouterr().err
+    args = cli._parser().parse_args(["train", "--run", "runs/x", "--base", "go2"])
+    assert cli._run_config(args).env_overrides["base"] == "go2"

@@ -1,9 +1,10 @@
-"""Can the A1 hold this arm up? Static balance over the arm's reach, judged like the balance QP.
+"""Can the base hold this arm up? Static balance over the arm's reach, judged like the balance QP.
 
 For arm configurations spread over the joint ranges (the home pose and `SAMPLES` uniform draws,
-seed 0; unlimited joints over [-pi, pi]), the A1 standing in its home pose must carry the whole
-robot on its four feet with forces that meet the balance QP's constraints (`control.balance`
-DEFAULTS: friction pyramid mu, f_min <= f_z <= f_max) and leg torques within the motors' limits.
+seed 0; unlimited joints over [-pi, pi]), the base (the A1 by default) standing in its home pose
+must carry the whole robot on its four feet with forces that meet the balance QP's constraints
+(`control.balance` DEFAULTS, the force bounds scaled to the base by `control.base_scaling`:
+friction pyramid mu, f_min <= f_z <= f_max) and leg torques within the motors' limits.
 All in the world frame (z up; N, m, N·m)::
 
     sum_i f_i = m g z_hat,   sum_i (p_i - c) x f_i = 0     static equilibrium (c: the robot's COM,
@@ -33,6 +34,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from dpc_mjx.control.balance import GRAVITY, default_params, friction_constraints
+from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.arms import UrdfArm
 from dpc_mjx.robots.assemble import assemble
@@ -129,8 +131,8 @@ def _torque_share(model, data, lay) -> tuple[float, tuple[float, float]]:
         a_eq[:3, 3 * i : 3 * i + 3] = np.eye(3)
         a_eq[3:, 3 * i : 3 * i + 3] = _skew(feet[i] - com)
     b_eq = np.array([0.0, 0.0, mass * GRAVITY, 0.0, 0.0, 0.0])
-    # the balance QP's own friction pyramids and force bounds, all four feet in stance
-    g, h = (np.asarray(a, float) for a in _friction_rows())
+    # the balance QP's own friction pyramids and force bounds (the base's), four feet in stance
+    g, h = (np.asarray(a, float) for a in _friction_rows(model_scale(model).mass))
     rows, h = [np.concatenate([g, np.zeros((len(g), 1))], 1)], list(h)
     tau_max = np.abs(model.actuator_ctrlrange[lay.leg_act]).max(axis=1)  # (12,) N·m
     jac = np.zeros((3, model.nv))
@@ -155,11 +157,12 @@ def _torque_share(model, data, lay) -> tuple[float, tuple[float, float]]:
 
 
 @functools.cache
-def _friction_rows():
-    """G (24, 12), h (24,) of `control.balance.friction_constraints` at its DEFAULTS, four feet
-    in stance (computed once)."""
+def _friction_rows(mass_ratio: float):
+    """G (24, 12), h (24,) of `control.balance.friction_constraints` with the force bounds of a
+    base `mass_ratio` times the A1's mass (`control.base_scaling`), four feet in stance."""
     p = default_params()
-    return friction_constraints(p.mu, p.f_min, p.f_max, jp.ones(4, bool))
+    f_min, f_max = p.f_min * mass_ratio, p.f_max * mass_ratio
+    return friction_constraints(p.mu, f_min, f_max, jp.ones(4, bool))
 
 
 def _skew(v: np.ndarray) -> np.ndarray:

@@ -12,6 +12,7 @@ import pathlib
 
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.registry import DEFAULT_TASK, resolve_arm, task_name
+from dpc_mjx.errors import DpcError
 from dpc_mjx.io.load import Artefacts, load
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import arm_name
@@ -57,7 +58,15 @@ def export_cells(
     ]
     for arm in arms:
         resolve_arm(arm)  # the A1 holds it up (`control.static_balance`), before any compile
+    options = {**env_overrides(artefacts, task), **(env or {})}
     if Controller.DPC in Controller.parse_all(controllers):  # 'policy' too; unknown names fail
         for arm in arms:
             artefacts.encoder(arm_name(arm))
-    return artefacts, arms, {**env_overrides(artefacts, task), **(env or {})}
+        trained_on = (artefacts.meta.get("env_config") or {}).get("base", "a1")
+        if options.get("base", trained_on) != trained_on:
+            raise DpcError(
+                f"The export {export_dir} was trained on the base {trained_on!r}; its policy "
+                f"and decoder do not carry to {options['base']!r}. Evaluate it on "
+                f"{trained_on!r} (drop --base), or train on that base (dpc-mjx train --base)."
+            )
+    return artefacts, arms, options

@@ -18,6 +18,10 @@
     dpc-mjx bench                      env steps/s of the full env vs MJX physics alone
     dpc-mjx variants                   every arm variant built and stood in MJX
     dpc-mjx mjcf                       write every variant's MJCF into mjcf/
+    dpc-mjx base go2 --out my_dog.json what a base's file gives, as a JSON to correct
+
+`--base go2` (a named base or your quadruped's .urdf/.json) on train, transfer, eval, sim2sim,
+render and view: the same as `--env base=go2` (`--set env.base=go2` for train).
 
 Hyperparameters are not flags: `--set name=value ...` overrides any `RunConfig` field by dotted
 name (`arm=longer`, `sac.num_envs=32`, `adapter.epochs=40`, `env.push_force=[0,60]`); values are
@@ -33,8 +37,11 @@ import sys
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 from dpc_mjx.run.cli_tools import (
+    BASE_HELP,
     CONTROLLER_NAMES,
     TASK_HELP,
+    add_env_options,
+    env_options,
     given,
     parse_sets,
     tool_commands,
@@ -52,6 +59,8 @@ def _run_config(args: argparse.Namespace):
         named["sac.num_timesteps"] = args.timesteps
     if getattr(args, "episodes", None):
         named["eval_episodes"] = args.episodes
+    if getattr(args, "base", None):
+        named["env.base"] = args.base
     device = getattr(args, "device", "cpu")
     if device == "auto":
         import jax  # noqa: PLC0415 (jax only for --device auto)
@@ -87,7 +96,7 @@ def _transfer(args: argparse.Namespace) -> None:
     from dpc_mjx.run.pipeline import transfer_arm  # noqa: PLC0415 (subcommand handler)
 
     options = given(args, ("samples", "task", "seed"))
-    transfer_arm(args.export, args.arm, **options, env=parse_sets(args.env))
+    transfer_arm(args.export, args.arm, **options, env=env_options(args))
 
 
 def _eval(args: argparse.Namespace) -> None:
@@ -106,7 +115,7 @@ def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
 
 def _env_options(args: argparse.Namespace) -> dict:
     """`--env NAME=VALUE ...` with `--engine` (if given) as the engine."""
-    env = parse_sets(args.env)
+    env = env_options(args)
     if getattr(args, "engine", None):
         if env.get("engine", args.engine) != args.engine:
             raise DpcError(f"--engine {args.engine} and --env engine={env['engine']} disagree.")
@@ -118,7 +127,7 @@ def _sim2sim(args: argparse.Namespace) -> None:
     from dpc_mjx.io.shipped import SHIPPED  # noqa: PLC0415 (subcommand handler)
     from dpc_mjx.run.sim2sim import sim2sim  # noqa: PLC0415 (subcommand handler)
 
-    sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=parse_sets(args.env))
+    sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=env_options(args))
 
 
 def _sweep(args: argparse.Namespace) -> None:
@@ -129,7 +138,7 @@ def _sweep(args: argparse.Namespace) -> None:
         args.export,
         upper_arm=args.upper_arm,
         gripper_mass=args.gripper_mass,
-        env=parse_sets(args.env),
+        env=env_options(args),
         **given(args, names),
     )
 
@@ -195,13 +204,14 @@ def _training_commands(sub) -> None:
     p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--seed", type=int, default=0)
     env = "env options over the export's, e.g. engine=native (collect in MuJoCo C)"
-    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
+    add_env_options(p, env)
     p.set_defaults(handler=_transfer)
 
 
 def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
     p.add_argument("--run", required=True, help="run folder (created)")
     p.add_argument("--arm", help="arm variant (default regular)")
+    p.add_argument("--base", help=BASE_HELP)
     p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--samples", type=int, help="adapter samples (default 100000)")
     p.add_argument(
@@ -252,7 +262,7 @@ def _evaluation_commands(sub) -> None:
     p.add_argument("--episodes", type=int, default=16, help="per grid point")
     p.add_argument("--steps", type=int, help="env steps per episode (default: the task's)")
     p.add_argument("--seed", type=int, default=1000)
-    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE")
+    add_env_options(p)
     p.add_argument("--out", default="runs/sweep", help="folder for the CSVs and heatmaps")
     p.set_defaults(handler=_sweep)
 
@@ -273,7 +283,7 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=1000)
     p.add_argument("--out", help="also write the table to this markdown file")
     env = "env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact sensors)"
-    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
+    add_env_options(p, env)
     csv = "one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)"
     p.add_argument("--csv", help=csv)
 

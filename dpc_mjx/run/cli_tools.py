@@ -30,6 +30,21 @@ def parse_sets(items: list[str]) -> dict:
     return out
 
 
+BASE_HELP = "the quadruped: a1 (default), go1, go2, b1, b1-z1, or your .urdf/.json file"
+
+
+def add_env_options(p: argparse.ArgumentParser, help_text: str | None = None) -> None:
+    """`--env NAME=VALUE ...` and `--base`, read back by `env_options`."""
+    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=help_text)
+    p.add_argument("--base", help=BASE_HELP)
+
+
+def env_options(args: argparse.Namespace) -> dict:
+    """The env options of `--env` and `--base` (the same as `--env base=...`)."""
+    options = parse_sets(args.env)
+    return options | ({"base": args.base} if args.base else {})
+
+
 def given(args: argparse.Namespace, names: tuple[str, ...]) -> dict:
     """The options `names` that have a value (None: the library's default, e.g. the task)."""
     return {k: getattr(args, k) for k in names if getattr(args, k) is not None}
@@ -50,7 +65,7 @@ def _render(args: argparse.Namespace) -> None:
         episodes=args.episodes,
         width=args.width,
         height=args.height,
-        env=parse_sets(args.env),
+        env=env_options(args),
     )
 
 
@@ -58,7 +73,7 @@ def _view(args: argparse.Namespace) -> None:
     from dpc_mjx.run.view import view  # noqa: PLC0415 (subcommand handler)
 
     names = ("controller", "arm", "task", "export", "seconds")
-    view(**given(args, names), env=parse_sets(args.env))
+    view(**given(args, names), env=env_options(args))
 
 
 def _export(args: argparse.Namespace) -> None:
@@ -144,7 +159,7 @@ def tool_commands(sub) -> None:
     p.add_argument("--width", type=int, default=480)
     p.add_argument("--height", type=int, default=360)
     env = "env options over the export's (engine=native: MuJoCo C)"
-    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
+    add_env_options(p, env)
     p.set_defaults(handler=_render)
 
     p = sub.add_parser("view", help="MuJoCo's viewer: a controller live, pushed with the mouse")
@@ -154,7 +169,7 @@ def tool_commands(sub) -> None:
     p.add_argument("--export", help="for dpc and the env options (default: the shipped export)")
     p.add_argument("--seconds", type=float, help="stop after this simulated time (default: never)")
     env = "env options over the export's (push_force=[0,30]: random pushes too; engine=mjx)"
-    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=env)
+    add_env_options(p, env)
     p.set_defaults(handler=_view)
 
     p = sub.add_parser("variants", help="build every arm variant and stand a batch of each")
