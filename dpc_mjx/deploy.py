@@ -25,8 +25,8 @@ I/O contract (`Measurement`; frames: world z up, trunk x forward, y left):
     quat         (4,)  trunk attitude, trunk -> world, (w, x, y, z) - the IMU's filter output
     gyro         (3,)  rad/s, trunk angular velocity, trunk frame
     accel        (3,)  m/s^2, specific force, trunk frame (at rest (0, 0, +9.81))
-    leg_q        (12,) rad, leg joints in `robots.a1.LEG_JOINTS` order: FR, FL, RR, RL legs,
-                       each hip, thigh, calf (the A1's URDF signs and zeros)
+    leg_q        (12,) rad, leg joints in `robots.layout.Layout.leg_joints` order: FR, FL,
+                       RR, RL legs, each hip, thigh, calf (the base file's signs and zeros)
     leg_qd       (12,) rad/s, same order
     arm_q        (n,)  rad (m for a finger), the arm's joints in the model's order
                        (`Deployment.arm_joints`)
@@ -36,8 +36,9 @@ I/O contract (`Measurement`; frames: world z up, trunk x forward, y left):
     contact      (4,)  foot contact flags (FR, FL, RR, RL; 1 in contact), or None: the gait's
                        planned stance (`estimator.stance_trust`)
 
-Returned: (12,) leg torques, N·m, `LEG_JOINTS` order, clipped to the A1's 33.5 N·m. The arm's
-servos are driven by its own planner (`arm_targets`), not by this loop.
+Returned: (12,) leg torques, N·m, `leg_joints` order, clipped to the base's motors' limits (the
+A1's 33.5 N·m; `Layout.torque_limits`). The arm's servos are driven by its own planner
+(`arm_targets`), not by this loop.
 """
 
 from __future__ import annotations
@@ -225,7 +226,7 @@ class Deployment:
     def _reset_fn(self, x: dict, xy: jax.Array) -> LoopState:
         d0 = self._data_at_origin(x)
         s0 = read_state(self.env.controller.idx, d0)
-        est = estimator.init(s0.foot_pos, xy)
+        est = estimator.init(s0.foot_pos, self.env.lay.foot_radius, xy)
         d = self._moved(d0, est.position, est.velocity)
         return LoopState(
             ctrl=self.env.controller.init(d), est=est, u_policy=jp.zeros(6), tick=jp.zeros((), int)
@@ -239,7 +240,15 @@ class Deployment:
         planned = estimator.stance_trust(ecfg, gait.phase(g, ls.ctrl.t), g.duty)
         trust = jp.where(x["contact"] >= 0, x["contact"], planned)
         est = estimator.update(
-            ecfg, ls.est, s0.rot, x["accel"], s0.foot_pos, s0.foot_vel, trust, ctl.dt
+            ecfg,
+            ls.est,
+            s0.rot,
+            x["accel"],
+            s0.foot_pos,
+            s0.foot_vel,
+            trust,
+            ctl.dt,
+            env.lay.foot_radius,
         )
         p, v = (x["truth"][:3], x["truth"][3:]) if truth else (est.position, est.velocity)
         d = self._moved(d0, p, v)

@@ -232,12 +232,12 @@ def _estimator(t: Timer, d, batch: int):
     """The base state estimator's update (deploy only), on zero-ish inputs of the batch."""
     cfg = estimator.EstimatorConfig()
     foot = jp.tile(jp.array([[0.2, 0.1, -0.26]] * 4), (batch, 1, 1))
-    est = jax.vmap(estimator.init)(foot)
+    est = jax.vmap(lambda f: estimator.init(f, 0.02))(foot)  # the A1's feet (m)
     rot = jp.tile(jp.eye(3), (batch, 1, 1))
     t.row(
         "[deploy only] state estimator update",
         lambda e, r, f: estimator.update(cfg, e, r, jp.array([0, 0, 9.81]), f, 0 * f, jp.ones(4),
-                                         0.004),
+                                         0.004, 0.02),
         est,
         rot,
         foot,

@@ -17,7 +17,8 @@ the joint angles and R) and d_i its velocity relative to the trunk (R (w x r_b +
 
     foot_i - p = r_i                 leg kinematics
     v = -d_i                         a stance foot does not slide
-    foot_i,z = FOOT_RADIUS           a stance foot is on the ground (flat ground at z = 0)
+    foot_i,z = r                     a stance foot is on the ground (flat ground at z = 0; r
+                                     the feet's radius, `robots.layout.Layout.foot_radius`)
 
 A foot in swing moves: its process noise and its velocity and height measurements' noise are
 multiplied by 1 + (1 - trust) `EstimatorConfig.swing_factor`, with trust in [0, 1] per foot
@@ -33,8 +34,6 @@ import jax
 import jax.numpy as jp
 import numpy as np
 from flax import struct
-
-from dpc_mjx.robots.a1 import FOOT_RADIUS
 
 GRAVITY = np.array([0.0, 0.0, -9.81], np.float32)  # m/s^2, world (numpy: no device at import)
 N_STATE = 18
@@ -85,10 +84,11 @@ class EstimatorState:
         return self.x[3:6]
 
 
-def init(foot_rel: jax.Array, xy: jax.Array | None = None) -> EstimatorState:
+def init(foot_rel: jax.Array, foot_radius: float, xy: jax.Array | None = None) -> EstimatorState:
     """Standing still with every foot on the ground: p_z from the feet's heights below the trunk
-    `foot_rel` (4, 3) (world frame, from the trunk origin); p_x, p_y = `xy` (default 0)."""
-    z = FOOT_RADIUS - jp.mean(foot_rel[:, 2])
+    `foot_rel` (4, 3) (world frame, from the trunk origin) and their radius `foot_radius` (m);
+    p_x, p_y = `xy` (default 0)."""
+    z = foot_radius - jp.mean(foot_rel[:, 2])
     p = jp.concatenate([jp.zeros(2) if xy is None else jp.asarray(xy), z[None]])
     feet = p + foot_rel
     x = jp.concatenate([p, jp.zeros(3), feet.reshape(-1)])
@@ -104,11 +104,12 @@ def update(
     foot_rel_vel: jax.Array,
     trust: jax.Array,
     dt: float,
+    foot_radius: float,
 ) -> EstimatorState:
     """One predict + correct step. `rot` (3, 3) trunk -> world; `accel` (3,) specific force,
     trunk frame, m/s^2; `foot_rel` (4, 3) m and `foot_rel_vel` (4, 3) m/s, each foot from /
     relative to the trunk origin, world frame; `trust` (4,) in [0, 1], that each foot is in
-    stance (`stance_trust`, or contact sensors)."""
+    stance (`stance_trust`, or contact sensors); `foot_radius` (m) the feet's."""
     eye3 = jp.eye(3)
     # Predict.
     a = rot @ accel + GRAVITY
@@ -126,7 +127,7 @@ def update(
 
     # Correct: rows [foot_i - p (12), v (12), foot_i,z (4)].
     h = jp.asarray(_MEASUREMENT)
-    y = jp.concatenate([foot_rel.reshape(-1), -foot_rel_vel.reshape(-1), jp.full(4, FOOT_RADIUS)])
+    y = jp.concatenate([foot_rel.reshape(-1), -foot_rel_vel.reshape(-1), jp.full(4, foot_radius)])
     r_diag = jp.concatenate(
         [
             jp.full(12, cfg.kinematics_std**2),
