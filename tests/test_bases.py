@@ -126,3 +126,12 @@ def test_the_commands_take_base(capsys):
     assert "trained on the base 'a1'" in capsys.readouterr().err
     args = cli._parser().parse_args(["train", "--run", "runs/x", "--base", "go2"])
     assert cli._run_config(args).env_overrides["base"] == "go2"
+
+
+def test_a_file_that_is_not_a_quadruped_is_refused():
+    with pytest.raises(DpcError, match="found 0 legs"):  # an arm
+        make("reaching", arm="none", base=str(assets.urdf_path("z1")))
+    if assets.wheel_installed():  # a humanoid
+        g1 = assets.wheel_urdf("g1_description/urdf/g1_29dof_rev_1_0.urdf")
+        with pytest.raises(DpcError, match="found 2 legs"):
+            make("reaching", arm="none", base=str(g1))
