@@ -11,8 +11,10 @@ not move (tests/test_eval_regression.py and the recorded tests guard them too).
 
 import dataclasses
 
+import jax
 import numpy as np
 import pytest
+from helpers import fast_jit
 
 from dpc_mjx import DpcError, assets, make
 from dpc_mjx.control.base_scaling import model_scale
@@ -49,7 +51,8 @@ def _assert_trots(ep: dict, what: str) -> None:
 
 
 @pytest.mark.parametrize("base", ["go1", "go2", "b1"])
-def test_named_base_trots_under_mbc(base):
+def test_named_base_trots_under_mbc(base, monkeypatch):
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: 4 envs, 100 steps
     _assert_trots(_trot(base, "none", "native", envs=4, seconds=2.0), base)
 
 

@@ -18,6 +18,7 @@ import functools
 
 import jax
 import jax.numpy as jp
+from jax import jit  # bound at import: a later patch of `jax.jit` (tests) does not reach the cache
 
 from dpc_mjx.control.qp.kernel import _run_kernel
 from dpc_mjx.control.qp.ops import _pin
@@ -70,7 +71,7 @@ def _batched_solver(cfg: QPSettings, st: _Structure):
     the same batch axis (nested vmaps become one batch)."""
 
     # jit: a process traces the kernel once per shape, not once per program that holds it
-    solve_many = jax.jit(lambda *args: _solve_many(args, cfg, st))
+    solve_many = jit(lambda *args: _solve_many(args, cfg, st))
 
     @jax.custom_batching.custom_vmap
     def many(*args):
@@ -91,7 +92,7 @@ def _batched_solver(cfg: QPSettings, st: _Structure):
 def _solver(cfg: QPSettings, st: _Structure):
     """f(*args of one problem) -> QPResult, whose vmap runs the batch-minor chunked kernel."""
 
-    run_kernel = jax.jit(lambda *args: _run_kernel(args, cfg, st))  # traced once per shape
+    run_kernel = jit(lambda *args: _run_kernel(args, cfg, st))  # traced once per shape
 
     @jax.custom_batching.custom_vmap
     def one(*args):
