@@ -1,15 +1,17 @@
 """Robot description files: the URDFs shipped with dpc_mjx, and the optional wheel's others.
 
-The A1, the SO-100 and the Unitree Z1 are built from verbatim copies of the `example-robot-data`
-6.0.0 wheel's URDFs, committed as package data in `dpc_mjx/descriptions/` (43 kB; provenance and
-licences in its README.md). Every named variant reads these copies, also where the wheel is
+The named bases (A1, Go1, Go2, B1, and the B1 carrying a Z1) and arms (SO-100, Unitree Z1) are
+built from verbatim copies of the `example-robot-data` 6.0.0 wheel's URDFs, committed as package
+data in `dpc_mjx/descriptions/` (provenance and licences in its README.md; `URDFS` is the one
+registry of them). Every named variant and base reads these copies, also where the wheel is
 installed: one source, so every install builds the same model (tests/test_assets_offline.py checks
-the copies against the wheel's files, and the models built from both). No named variant reads a
-mesh: the wheel's visual meshes are COLLADA, the A1 collides through primitives and the arms never
-collide (`dpc_mjx.robots.urdf`), so renders draw primitives on every install. The repository's
-`mjcf/` folder (`dpc-mjx mjcf mjcf`) is an export of the variants built from these files, not a
-source: an `ArmSpec` of your own or your own arm file needs the bare A1, and `mjcf/` is not in the
-installed package.
+the copies against the wheel's files, and the models built from both). No named model reads a
+mesh: the wheel's visual meshes are COLLADA, the bases collide through their feet only and the
+arms never collide (`dpc_mjx.robots.urdf`), so renders draw primitives on every install (Go2's
+trunk collision mesh, shipped in `descriptions/meshes/go2/`, only gives its box its size). The
+repository's `mjcf/` folder (`dpc-mjx mjcf mjcf`) is an export of the variants built from these
+files, not a source: an `ArmSpec` of your own or your own arm file needs the bare A1, and `mjcf/`
+is not in the installed package.
 
 The 440 MB wheel is optional (`pip install 'dpc_mjx[urdf]'`): `wheel_urdf` finds its other robots'
 URDFs, through the installed distribution's file list (no path of this machine is hard-coded and
@@ -30,6 +32,10 @@ DESCRIPTIONS = pathlib.Path(__file__).parent / "descriptions"  # the committed U
 # Short name -> (file in DESCRIPTIONS, the path it was copied from under the wheel's robots/).
 URDFS = {
     "a1": ("a1.urdf", "a1_description/urdf/a1.urdf"),
+    "go1": ("go1.urdf", "go1_description/urdf/go1.urdf"),
+    "go2": ("go2.urdf", "go2_description/urdf/go2.urdf"),
+    "b1": ("b1.urdf", "b1_description/urdf/b1.urdf"),
+    "b1-z1": ("b1-z1.urdf", "b1_description/urdf/b1-z1.urdf"),
     "so100": ("so100.urdf", "so_arm_description/urdf/so100.urdf"),
     "z1": ("z1.urdf", "z1_description/urdf/z1.urdf"),
 }

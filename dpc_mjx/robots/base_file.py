@@ -42,14 +42,9 @@ from dpc_mjx.robots import base_home
 from dpc_mjx.robots.arm_file import inside
 from dpc_mjx.robots.base_urdf import MASSLESS, UrdfTree, compile_base, read_json, subtree_urdf
 
-# Name -> (file in dpc_mjx/descriptions/, the path it was copied from under the wheel's robots/).
-NAMED_BASES = {
-    "a1": ("a1.urdf", "a1_description/urdf/a1.urdf"),
-    "go1": ("go1.urdf", "go1_description/urdf/go1.urdf"),
-    "go2": ("go2.urdf", "go2_description/urdf/go2.urdf"),
-    "b1": ("b1.urdf", "b1_description/urdf/b1.urdf"),
-    "b1-z1": ("b1-z1.urdf", "b1_description/urdf/b1-z1.urdf"),  # B1 carrying a Z1: `others`
-}
+# Name -> (file in dpc_mjx/descriptions/, the path it was copied from under the wheel's robots/):
+# `assets.URDFS`' quadrupeds (b1-z1: the B1 carrying a Z1, its `others`).
+NAMED_BASES = {name: assets.URDFS[name] for name in ("a1", "go1", "go2", "b1", "b1-z1")}
 MESHES = assets.DESCRIPTIONS / "meshes"  # meshes/<name>/: the collision meshes a named base reads
 
 LEGS = ("FR", "FL", "RR", "RL")  # front-right, front-left, rear-right, rear-left (robots.a1's)
@@ -182,13 +177,7 @@ def base_file_path(name: str) -> pathlib.Path:
     """The shipped URDF of the named base `name` (one of NAMED_BASES)."""
     if name not in NAMED_BASES:
         raise DpcError(f"No base named {name!r}; known: {sorted(NAMED_BASES)}.")
-    path = assets.DESCRIPTIONS / NAMED_BASES[name][0]
-    if not path.is_file():
-        raise DpcError(
-            f"{path} is missing from the installed dpc_mjx; reinstall it (`pip install .` ships "
-            "dpc_mjx/descriptions/ as package data)."
-        )
-    return path
+    return assets.urdf_path(name)  # the one registry of shipped files
 
 
 def _locate(base) -> tuple[str, pathlib.Path, pathlib.Path | None, dict]:
