@@ -59,6 +59,7 @@ def static_balance(robot) -> StaticBalance:
     """Check a robot (anything `robots.resolve` takes; its files read but no MJX compile)."""
     model = assemble(robot).compile()
     lay = layout(model)
+    mass_ratio = model_scale(model).mass  # the base's force bounds (control.base_scaling)
     data = mujoco.MjData(model)
     rng = np.random.default_rng(0)
     lo, hi = _arm_ranges(model, lay.arm_qpos, lay.arm_dof)
@@ -70,7 +71,7 @@ def static_balance(robot) -> StaticBalance:
         data.qpos[lay.arm_qpos] = arm_q
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        s, offset = _torque_share(model, data, lay)
+        s, offset = _torque_share(model, data, lay, mass_ratio)
         if s > worst[0]:
             worst = (s, arm_q, offset)
     s, arm_q, offset = worst
@@ -120,8 +121,9 @@ def _arm_ranges(model, qpos_adr, dof_adr) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _torque_share(model, data, lay) -> tuple[float, tuple[float, float]]:
-    """The LP of the module doc at the current kinematics: min s (inf if infeasible)."""
+def _torque_share(model, data, lay, mass_ratio: float) -> tuple[float, tuple[float, float]]:
+    """The LP of the module doc at the current kinematics: min s (inf if infeasible); the force
+    bounds of a base `mass_ratio` times the A1's mass."""
     mass = float(model.body_mass.sum())
     com = data.subtree_com[0]
     feet = data.site_xpos[lay.foot_sites]  # (4, 3)
@@ -132,7 +134,7 @@ def _torque_share(model, data, lay) -> tuple[float, tuple[float, float]]:
         a_eq[3:, 3 * i : 3 * i + 3] = _skew(feet[i] - com)
     b_eq = np.array([0.0, 0.0, mass * GRAVITY, 0.0, 0.0, 0.0])
     # the balance QP's own friction pyramids and force bounds (the base's), four feet in stance
-    g, h = (np.asarray(a, float) for a in _friction_rows(model_scale(model).mass))
+    g, h = (np.asarray(a, float) for a in _friction_rows(mass_ratio))
     rows, h = [np.concatenate([g, np.zeros((len(g), 1))], 1)], list(h)
     tau_max = np.abs(model.actuator_ctrlrange[lay.leg_act]).max(axis=1)  # (12,) N·m
     jac = np.zeros((3, model.nv))
