@@ -133,12 +133,7 @@ def _other_links(base: BaseSpec) -> tuple[str, ...]:
     if not base.others:
         return ()
     tree = UrdfTree.parse(base.path)
-    links, todo = [], [limb.root for limb in base.others]
-    while todo:
-        link = todo.pop()
-        links.append(link)
-        todo += [tree.joints[j]["child"] for j in tree.out(link)]
-    return tuple(links)
+    return tuple(link for limb in base.others for link in tree.subtree_links(limb.root))
 
 
 __all__ = [

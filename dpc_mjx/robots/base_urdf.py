@@ -89,6 +89,15 @@ class UrdfTree:
     def end_links(self, chain: tuple[str, ...]) -> list[str]:
         return self.welded(self.joints[chain[-1]]["child"])
 
+    def subtree_links(self, root: str) -> list[str]:
+        """`root` and every link below it, breadth first."""
+        links, todo = [], [root]
+        while todo:
+            link = todo.pop(0)
+            links.append(link)
+            todo += [self.joints[j]["child"] for j in self.out(link)]
+        return links
+
     def subtree_joints(self, first: str) -> tuple[str, ...]:
         found, todo = [], [first]
         while todo:
@@ -212,11 +221,7 @@ def subtree_urdf(tree: UrdfTree, root: str, name: str) -> str:
     a base's file, B1's Z1), meshes dropped and primitive collision shapes kept, as for the named
     arms (`robots.urdf.strip_meshes`); `root` is its root link."""
     out = ET.Element("robot", name=name)
-    links, todo = [], [root]
-    while todo:
-        link = todo.pop(0)
-        links.append(link)
-        todo += [tree.joints[j]["child"] for j in tree.out(link)]
+    links = tree.subtree_links(root)
     for link in links:
         element = copy.deepcopy(tree.links[link])
         strip_meshes(element)
