@@ -70,16 +70,20 @@ def base_scale(idx: StateIndex) -> BaseScale:
     )
 
 
+def force_bounds(mass_ratio: float) -> tuple[float, float]:
+    """(f_min, f_max) N: a stance foot's normal-force bounds on a base `mass_ratio` times the
+    A1's mass (the balance QP's and the static-balance check's)."""
+    return balance.DEFAULTS["f_min"] * mass_ratio, balance.DEFAULTS["f_max"] * mass_ratio
+
+
 def scaled_config(config, scale: BaseScale, lay: Layout, idx: StateIndex):
     """`config` (a `ControllerConfig` with the A1's numbers) scaled to the base (module doc)."""
     m, length = scale.mass, scale.length
+    f_min, f_max = force_bounds(m)
     params = balance.default_params(
-        mass=idx.base_mass,
-        inertia=(1.0, 1.0, 1.0),
-        f_min=balance.DEFAULTS["f_min"] * m,
-        f_max=balance.DEFAULTS["f_max"] * m,
+        mass=idx.base_mass, inertia=(1.0, 1.0, 1.0), f_min=f_min, f_max=f_max,
         R=balance.DEFAULTS["R"] / m**2,
-    )
+    )  # fmt: skip
     params = dataclasses.replace(params, inertia=jp.asarray(idx.base_inertia, jp.float32))
     return config.replace(
         balance=params,
@@ -98,4 +102,4 @@ def model_scale(model: mujoco.MjModel) -> BaseScale:
     return base_scale(state_index(model, layout(model)))
 
 
-__all__ = ["FALL_HEIGHT", "BaseScale", "base_scale", "model_scale", "scaled_config"]
+__all__ = ["FALL_HEIGHT", "BaseScale", "base_scale", "force_bounds", "model_scale", "scaled_config"]

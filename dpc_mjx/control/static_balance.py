@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from dpc_mjx.control.balance import GRAVITY, default_params, friction_constraints
-from dpc_mjx.control.base_scaling import model_scale
+from dpc_mjx.control.base_scaling import force_bounds, model_scale
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.arms import UrdfArm
 from dpc_mjx.robots.assemble import assemble
@@ -162,9 +162,8 @@ def _torque_share(model, data, lay, mass_ratio: float) -> tuple[float, tuple[flo
 def _friction_rows(mass_ratio: float):
     """G (24, 12), h (24,) of `control.balance.friction_constraints` with the force bounds of a
     base `mass_ratio` times the A1's mass (`control.base_scaling`), four feet in stance."""
-    p = default_params()
-    f_min, f_max = p.f_min * mass_ratio, p.f_max * mass_ratio
-    return friction_constraints(p.mu, f_min, f_max, jp.ones(4, bool))
+    f_min, f_max = force_bounds(mass_ratio)
+    return friction_constraints(default_params().mu, f_min, f_max, jp.ones(4, bool))
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
