@@ -1,10 +1,13 @@
-"""A quadruped base read from its URDF file as a `BaseSpec` (`robots.base_model` builds it).
+"""A quadruped base read from its URDF or MJCF file as a `BaseSpec` (`robots.base_model` builds
+it).
 
 `read_base(base)`: `base` is a named base (`NAMED_BASES`: a1, go1, go2, b1, and b1-z1, the B1
 carrying a Z1 whose arm `arm_urdf` splits off; their URDFs ship in `dpc_mjx/descriptions/`), the
-path of a .urdf file, or of a .json file naming the URDF and what inference cannot decide
-(`{"file": "my_dog.urdf", "legs": {"FR": "<hip joint>", ...}, "home_height": 0.3,
-"foot_radius": 0.02}`, paths relative to the JSON). What is inferred:
+path of a .urdf or an MJCF .xml file, or of a .json file naming that file and what inference
+cannot decide (`{"file": "my_dog.urdf", "legs": {"FR": "<hip joint>", ...}, "home_height": 0.3,
+"foot_radius": 0.02}`, paths relative to the JSON). An MJCF is read as a URDF is, its bodies the
+links (`robots.base_mjcf` says how: its free joint's body or its one top-level body is the root,
+its torque limits are its motors' or joints' force ranges). What is inferred:
 
 - the trunk: the URDF's root link, skipping massless links (< MASSLESS kg) welded on top by a
   fixed joint (Go1's and B1's `base`); it gets the free joint;
@@ -40,7 +43,8 @@ from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import base_home
 from dpc_mjx.robots.arm_file import inside
-from dpc_mjx.robots.base_urdf import MASSLESS, UrdfTree, compile_base, read_json, subtree_urdf
+from dpc_mjx.robots.base_mjcf import is_mjcf, read_tree
+from dpc_mjx.robots.base_urdf import MASSLESS, UrdfTree, read_json, subtree_urdf
 
 # Name -> (file in dpc_mjx/descriptions/, the path it was copied from under the wheel's robots/):
 # `assets.URDFS`' quadrupeds (b1-z1: the B1 carrying a Z1, its `others`).
@@ -54,7 +58,7 @@ HOME_FRACTION = 0.625  # home: the hip this fraction of the leg's length above t
 FOOT_FRACTION = 0.05  # a foot without a sphere in its file: radius = this x the leg's length
 _JSON_KEYS = ("file", "legs", "home_height", "foot_radius")  # "file" required
 _FIX_LEGS = (
-    'name the legs in a JSON file, {"file": "<the .urdf>", "legs": {"FR": "<its first joint>", '
+    'name the legs in a JSON file, {"file": "<the base file>", "legs": {"FR": "<its first joint>", '
     '"FL": ..., "RR": ..., "RL": ...}}, and read that (or pass legs={...} to read_base)'
 )
 
@@ -65,7 +69,7 @@ class Leg:
 
     place: str  # one of LEGS
     joints: tuple[str, ...]  # LEG_DOF joint names, hip (ab/adduction), thigh, knee
-    torque_limits: tuple[float, ...]  # N·m per joint, the URDF's <limit effort>
+    torque_limits: tuple[float, ...]  # N·m per joint, the file's (URDF: <limit effort>)
     foot: str  # the link holding the foot
     foot_center: tuple[float, float, float]  # m, in the foot link's frame
     foot_radius: float  # m
@@ -139,7 +143,7 @@ def read_base(
     legs: dict[str, str] | None = None,
     foot_radius: float | None = None,
 ) -> BaseSpec:
-    """The base `base` (a name of NAMED_BASES, a .urdf or a .json path; module doc), read and
+    """The base `base` (a name of NAMED_BASES, a .urdf, .xml or .json path; module doc), read and
     checked: `DpcError` naming the problem and the fix. `legs` maps each place of LEGS to the
     first joint of its leg; `home_height` (m) and `foot_radius` (m) replace the inferred ones."""
     name, path, mesh_dir, options = _locate(base)
@@ -163,6 +167,11 @@ def arm_urdf(spec: BaseSpec, limb: Limb | None = None) -> str:
     """The URDF text of an arm carried in the base's file (`limb`, default the one of
     `spec.others`): its links and joints, meshes dropped. Write it to a .urdf file and mount it as
     `UrdfArm(path)` at `limb.mount_pos` (m, trunk frame) turned by `limb.mount_quat`."""
+    if is_mjcf(spec.path):
+        raise DpcError(
+            f"Base {spec.path} is an MJCF, not a URDF to split; copy its arm's bodies into an "
+            "MJCF file of their own and mount that as UrdfArm(path)."
+        )
     if limb is None:
         if len(spec.others) != 1:
             raise DpcError(
@@ -181,24 +190,24 @@ def base_file_path(name: str) -> pathlib.Path:
 
 
 def _locate(base) -> tuple[str, pathlib.Path, pathlib.Path | None, dict]:
-    """(name, URDF path, folder of a named base's meshes or None, options of a JSON file)."""
+    """(name, URDF or MJCF path, folder of a named base's meshes or None, a JSON's options)."""
     if isinstance(base, str) and base in NAMED_BASES:
         return base, base_file_path(base), MESHES / base, {}
     p = pathlib.Path(base).expanduser()
     if not p.is_file():
         raise DpcError(
             f"Base file {str(base)!r} does not exist; give a named base ({sorted(NAMED_BASES)}), "
-            "the path of the quadruped's .urdf file or of a .json naming it (relative paths "
-            f"are taken from the current directory, {os.getcwd()})."
+            "the path of the quadruped's .urdf or MJCF .xml file or of a .json naming it (paths "
+            f"relative to the current directory, {os.getcwd()})."
         )
     if p.suffix.lower() == ".json":
         options = read_json(p, _JSON_KEYS)
         name, path, mesh_dir, _ = _locate(p.parent / str(options.pop("file")))
         return name, path, mesh_dir, options
-    if p.suffix.lower() != ".urdf":
+    if p.suffix.lower() != ".urdf" and not is_mjcf(p):
         raise DpcError(
-            f"Base file {p} is not a URDF (.urdf) or a JSON (.json) naming one; convert the "
-            "robot's description to URDF (xacro files: run `xacro` first)."
+            f"Base file {p} is not a URDF (.urdf), an MJCF (.xml) or a JSON (.json) naming one; "
+            "convert the robot's description to URDF or MJCF (xacro files: run `xacro` first)."
         )
     named = [n for n in NAMED_BASES if base_file_path(n) == p.resolve()]  # a shipped file
     mesh_dir = MESHES / named[0] if named else None
@@ -207,9 +216,9 @@ def _locate(base) -> tuple[str, pathlib.Path, pathlib.Path | None, dict]:
 
 @functools.lru_cache(maxsize=16)
 def _read_cached(p, _mtime, name, mesh_dir, height, leg_names, radius) -> BaseSpec:
-    tree = UrdfTree.parse(p)
+    tree = read_tree(p)  # a UrdfTree or an MjcfTree
     trunk, skipped = tree.trunk()
-    model = compile_base(tree, trunk, skipped, mesh_dir)
+    model = tree.compile(trunk, skipped, mesh_dir)
     data = mujoco.MjData(model)
     for j in range(model.njnt):  # the zero pose, clipped into the joints' ranges
         lo, hi = inside(model.jnt_range[j]) if model.jnt_limited[j] else (0.0, 0.0)
@@ -362,7 +371,7 @@ def _trunk_numbers(tree, model, data, trunk, limbs) -> tuple:
     if not geoms:
         raise DpcError(
             f"Base {tree.path}: the trunk link {trunk!r} has no collision shape, so its box (where "
-            "arms are mounted) is unknown; give it a <collision> <box> (or a mesh)."
+            "arms are mounted) is unknown; give it a <collision> <box> or a mesh (MJCF: <geom>)."
         )
     box = base_home.geom_box(model, data, primitives or geoms)
     return (

@@ -2,11 +2,13 @@
 its parts on every base.
 
 `base_mjspec(base)`: the base's URDF (meshes dropped, as `robots.urdf` does for every shipped
-file), its trunk given the free joint `ROOT_JOINT`, an IMU site on the trunk's origin, a foot site
-and a foot sphere per leg (the file's sphere, or one of the spec's radius where the file has none),
-a torque motor per leg joint (range: the file's effort), IMU-like sensors, and contacts only
-between the feet and the floor (the MJX-friendly "feet only" layout). An actuated subtree of the
-file that is not a leg (`base.others`: B1's Z1) is left out: it is mounted as an arm.
+file) or MJCF (its own actuators, sensors, sites, keyframes and options dropped too:
+`robots.base_mjcf.load_mjcf`), its trunk given the free joint `ROOT_JOINT`, an IMU site on the
+trunk's origin, a foot site and a foot sphere per leg (the file's sphere, or one of the spec's
+radius where the file has none), a torque motor per leg joint (range: the file's effort),
+IMU-like sensors, and contacts only between the feet and the floor (the MJX-friendly "feet only"
+layout). An actuated subtree of the file that is not a leg (`base.others`: B1's Z1) is left out:
+it is mounted as an arm.
 
 Whatever the file calls them, the library's names are the same on every base: actuators
 `<place>_<part>` (`FR_hip`, ..., `RL_calf`; places `base_file.LEGS`, parts `LEG_PARTS`), foot sites
@@ -27,6 +29,7 @@ import numpy as np
 
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.base_file import LEGS, BaseSpec, base_file_path, read_base
+from dpc_mjx.robots.base_mjcf import is_mjcf, load_mjcf
 from dpc_mjx.robots.base_urdf import UrdfTree
 from dpc_mjx.robots.urdf import load_urdf, make_visual
 
@@ -56,8 +59,8 @@ def as_base(base: str | os.PathLike | BaseSpec) -> BaseSpec:
         return base
     if not isinstance(base, (str, os.PathLike)):
         raise DpcError(
-            f"base must be a base's name, the path of its .urdf/.json file or a BaseSpec, got "
-            f"{type(base).__name__}."
+            "base must be a base's name, the path of its .urdf/.xml/.json file or a BaseSpec, "
+            f"got {type(base).__name__}."
         )
     return read_base(base)
 
@@ -86,7 +89,10 @@ def home_pose(base: BaseSpec) -> tuple[float, np.ndarray]:
 
 def base_mjspec(base: BaseSpec) -> mujoco.MjSpec:
     """The base as a spec: trunk with a free joint, leg motors, feet, sites, sensors; no floor."""
-    spec = load_urdf(base.path, drop_links=base.skipped_roots + _other_links(base))
+    if is_mjcf(base.path):
+        spec = load_mjcf(base.path, base.trunk, base.skipped_roots, base.others)
+    else:
+        spec = load_urdf(base.path, drop_links=base.skipped_roots + _other_links(base))
     spec.modelname = base.name
     trunk = spec.body(base.trunk)
     trunk.add_freejoint(name=ROOT_JOINT)

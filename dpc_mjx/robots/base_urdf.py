@@ -1,7 +1,8 @@
-"""A base's URDF (`dpc_mjx.robots.base_file` reads it): its tree of links and joints, checked;
-the XML MuJoCo compiles of it (the base alone, the trunk welded at the world origin, so that world
-coordinates are trunk-frame coordinates); a subtree of it (an arm it carries) as a URDF of its
-own; the base's JSON file.
+"""A base's URDF (`dpc_mjx.robots.base_file` reads it): its tree of links and joints, checked
+(`LinkTree`: the walks, shared with an MJCF's bodies, `robots.base_mjcf`); the XML MuJoCo
+compiles of it (the base alone, the trunk welded at the world origin, so that world coordinates
+are trunk-frame coordinates); a subtree of it (an arm it carries) as a URDF of its own; the
+base's JSON file.
 """
 
 from __future__ import annotations
@@ -20,42 +21,27 @@ from dpc_mjx.robots.urdf import strip_meshes
 MASSLESS = 1e-4  # kg: a root link lighter than this is a placeholder (Go1's base: 1e-6 kg)
 
 
-class UrdfTree:
-    """A URDF's links and joints, checked: one tree of revolute, continuous, prismatic and fixed
-    joints. `joints[name]` holds its type, parent and child link and XML element."""
+class LinkTree:
+    """Links joined into one tree by joints, walked as `base_file` walks a base: `joints[name]`
+    holds its type ("fixed" or movable), parent and child link; `root_name` is the root link.
+    A URDF's (`UrdfTree`) or an MJCF's bodies (`base_mjcf.MjcfTree`)."""
 
-    def __init__(self, path: pathlib.Path, root: ET.Element):
-        self.path, self.root = path, root
-        self.links = {link.get("name"): link for link in root.findall("link")}
-        self.joints = {}
-        for j in root.findall("joint"):
-            kind = j.get("type")
-            if kind not in (*URDF_MOVABLE, "fixed"):
-                raise DpcError(
-                    f"Base {path}: joint {j.get('name')!r} is {kind!r}; a base's joints are "
-                    "revolute, continuous, prismatic or fixed (the trunk's free joint is added). "
-                    "Replace it."
-                )
-            parent, child = j.find("parent").get("link"), j.find("child").get("link")
-            self.joints[j.get("name")] = {"type": kind, "parent": parent, "child": child, "xml": j}
-        children = {j["child"] for j in self.joints.values()}
-        roots = [name for name in self.links if name not in children]
-        if len(roots) != 1:
-            raise DpcError(
-                f"Base {path}: its links form {len(roots)} trees (roots {roots}); a base is one "
-                "tree of links joined by <joint>s. Join or remove the loose links."
-            )
-        self.root_name = roots[0]
+    path: pathlib.Path
+    joints: dict[str, dict]
+    root_name: str
 
-    @classmethod
-    def parse(cls, p: pathlib.Path) -> UrdfTree:
-        try:
-            root = ET.parse(p).getroot()
-        except ET.ParseError as e:
-            raise DpcError(f"Base file {p} is not well-formed XML ({e}); fix the file.") from e
-        if root.tag != "robot":
-            raise DpcError(f"Base file {p}: a URDF's top element is <robot>, not <{root.tag}>.")
-        return cls(p, root)
+    def mass(self, link: str) -> float:
+        """kg, the link's own."""
+        raise NotImplementedError
+
+    def effort(self, joint: str, place: str) -> float:
+        """N·m, the torque limit of `joint` (of the leg at `place`); `DpcError` where none."""
+        raise NotImplementedError
+
+    def compile(self, trunk: str, skipped: tuple[str, ...], mesh_dir) -> mujoco.MjModel:
+        """The base alone, `trunk` welded at the origin, `skipped` dropped (world coordinates
+        are trunk-frame coordinates); `mesh_dir`: the folder of a named base's meshes, or None."""
+        raise NotImplementedError
 
     def out(self, link: str) -> list[str]:
         return [n for n, j in self.joints.items() if j["parent"] == link]
@@ -106,6 +92,67 @@ class UrdfTree:
             todo += self.movable_out(self.joints[name]["child"])
         return tuple(found)
 
+    def trunk(self) -> tuple[str, tuple[str, ...]]:
+        """The trunk link and the massless links above it (dropped): a massless root welded to
+        one link below it is skipped (Go1's `base`); one carrying links welded on (ANYmal's
+        `base`) is the trunk, whose mass is theirs."""
+        name, skipped = self.root_name, []
+        while self.mass(name) < MASSLESS:
+            out = self.out(name)
+            if len(out) == 1 and self.joints[out[0]]["type"] == "fixed":
+                skipped.append(name)
+                name = self.joints[out[0]]["child"]
+                continue
+            if sum(self.mass(w) for w in self.welded(name)) < MASSLESS:
+                raise DpcError(
+                    f"Base {self.path}: the root link {name!r} and the links welded to it have "
+                    "no mass; the trunk is the root link (it gets the free joint). Give it an "
+                    "<inertial> (mass > 0) or remove it."
+                )
+            break
+        return name, tuple(skipped)
+
+
+class UrdfTree(LinkTree):
+    """A URDF's links and joints, checked: one tree of revolute, continuous, prismatic and fixed
+    joints. `joints[name]` holds its type, parent and child link and XML element."""
+
+    def __init__(self, path: pathlib.Path, root: ET.Element):
+        self.path, self.root = path, root
+        self.links = {link.get("name"): link for link in root.findall("link")}
+        self.joints = {}
+        for j in root.findall("joint"):
+            kind = j.get("type")
+            if kind not in (*URDF_MOVABLE, "fixed"):
+                raise DpcError(
+                    f"Base {path}: joint {j.get('name')!r} is {kind!r}; a base's joints are "
+                    "revolute, continuous, prismatic or fixed (the trunk's free joint is added). "
+                    "Replace it."
+                )
+            parent, child = j.find("parent").get("link"), j.find("child").get("link")
+            self.joints[j.get("name")] = {"type": kind, "parent": parent, "child": child, "xml": j}
+        children = {j["child"] for j in self.joints.values()}
+        roots = [name for name in self.links if name not in children]
+        if len(roots) != 1:
+            raise DpcError(
+                f"Base {path}: its links form {len(roots)} trees (roots {roots}); a base is one "
+                "tree of links joined by <joint>s. Join or remove the loose links."
+            )
+        self.root_name = roots[0]
+
+    @classmethod
+    def parse(cls, p: pathlib.Path) -> UrdfTree:
+        try:
+            root = ET.parse(p).getroot()
+        except ET.ParseError as e:
+            raise DpcError(f"Base file {p} is not well-formed XML ({e}); fix the file.") from e
+        if root.tag != "robot":
+            raise DpcError(f"Base file {p}: a URDF's top element is <robot>, not <{root.tag}>.")
+        return cls(p, root)
+
+    def mass(self, link: str) -> float:
+        return _mass(self.links[link])
+
     def effort(self, joint: str, place: str) -> float:
         """N·m, the joint's <limit effort>; `DpcError` where it has none."""
         limit = self.joints[joint]["xml"].find("limit")
@@ -117,25 +164,9 @@ class UrdfTree:
             )
         return effort
 
-    def trunk(self) -> tuple[str, tuple[str, ...]]:
-        """The trunk link and the massless links above it (dropped): a massless root welded to
-        one link below it is skipped (Go1's `base`); one carrying links welded on (ANYmal's
-        `base`) is the trunk, whose mass is theirs."""
-        name, skipped = self.root_name, []
-        while _mass(self.links[name]) < MASSLESS:
-            out = self.out(name)
-            if len(out) == 1 and self.joints[out[0]]["type"] == "fixed":
-                skipped.append(name)
-                name = self.joints[out[0]]["child"]
-                continue
-            if sum(_mass(self.links[w]) for w in self.welded(name)) < MASSLESS:
-                raise DpcError(
-                    f"Base {self.path}: the root link {name!r} and the links welded to it have "
-                    "no mass; the trunk is the root link (it gets the free joint). Give it an "
-                    "<inertial> (mass > 0) or remove it."
-                )
-            break
-        return name, tuple(skipped)
+    def compile(self, trunk: str, skipped: tuple[str, ...], mesh_dir) -> mujoco.MjModel:
+        """`compile_base` of this tree."""
+        return compile_base(self, trunk, skipped, mesh_dir)
 
 
 def _mass(link: ET.Element) -> float:
@@ -180,18 +211,22 @@ def compile_base(tree: UrdfTree, trunk: str, skipped: tuple[str, ...], mesh_dir)
 
 
 def read_json(p: pathlib.Path, keys: tuple[str, ...]) -> dict:
-    """A base's JSON file (`base_file.read_base`): an object of `keys`, "file" a .urdf."""
+    """A base's JSON file (`base_file.read_base`): an object of `keys`, "file" a .urdf or an
+    MJCF .xml."""
     try:
         options = json.loads(p.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise DpcError(f"Base JSON {p} is not valid JSON ({e}); fix the file.") from e
     if not isinstance(options, dict) or "file" not in options or set(options) - set(keys):
         raise DpcError(
-            f"Base JSON {p}: an object with the keys {keys} ('file' required: the .urdf, "
-            f"relative to the JSON), got {options!r}."
+            f"Base JSON {p}: an object with the keys {keys} ('file' required: the .urdf or "
+            f".xml, relative to the JSON), got {options!r}."
         )
-    if pathlib.Path(str(options["file"])).suffix.lower() != ".urdf":
-        raise DpcError(f"Base JSON {p}: 'file' must name a .urdf file, got {options['file']!r}.")
+    if pathlib.Path(str(options["file"])).suffix.lower() not in (".urdf", ".xml"):
+        raise DpcError(
+            f"Base JSON {p}: 'file' must name a .urdf or an MJCF .xml file, got "
+            f"{options['file']!r}."
+        )
     return options
 
 
@@ -233,4 +268,4 @@ def subtree_urdf(tree: UrdfTree, root: str, name: str) -> str:
     return ET.tostring(out, encoding="unicode")
 
 
-__all__ = ["MASSLESS", "UrdfTree", "compile_base", "read_json", "subtree_urdf"]
+__all__ = ["MASSLESS", "LinkTree", "UrdfTree", "compile_base", "read_json", "subtree_urdf"]
