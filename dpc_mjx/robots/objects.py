@@ -54,10 +54,10 @@ _BOX_RGBA, _TABLE_RGBA, _BALL_RGBA = [0.7, 0.5, 0.3, 1], [0.55, 0.45, 0.35, 1], 
 
 
 def robot_scene(robot: RobotSpec, scene: str) -> mujoco.MjSpec:
-    """The spec of `robot` on the floor, named `a1_<variant>_<scene>`, with every end effector
+    """The spec of `robot` on the floor, named `<base>_<variant>_<scene>`, with every end effector
     touching boxes (`enable_ee_contacts`); raises `DpcError` if `robot` has no arm."""
     spec = build_spec(robot)
-    spec.modelname = f"a1_{robot.name}_{scene}"
+    spec.modelname = f"{spec.modelname}_{scene}"  # `assemble`'s <base>_<variant>
     if not robot.arms:
         raise DpcError(f"Task {scene!r} needs an arm; variant {robot.name!r} has none.")
     for i in range(len(robot.arms)):

@@ -25,6 +25,12 @@ U(`script_rate`)) and adds its own weight to each ball (`object_mass`); the body
 place, command 0) and the end effectors get vertical pushes (`push_force`; no payload).
 Calibration: docs/results.md (Table I).
 
+On another base the scene moves with the arm's mount (`scripts.mount_offset`: (dx, dz) m, world
+frame, x forward, z up, the first arm's mount standing on this base minus on the A1; (0, 0) on
+the A1): both tables, and the balls on them, move dx along x, and their tops rise dz (the tables
+grow dz taller), while `robot_x` (the trunk's place) stays; relative to the shoulder the scene and
+every waypoint's IK solution are the A1's.
+
 Grasp: a weld, not friction (see `robots.objects`). During the close move and its hold, weld k
 switches on as soon as the grasp site is within `grasp_threshold` of ball k
 (`objects.grasp_gaps`), and stays on until the release move starts (`task_physics`, every
@@ -78,7 +84,7 @@ class CarryingConfig(EnvConfig):
     """`EnvConfig` plus the carrying script."""
 
     grasp_threshold: float = 0.03  # m, grasp site to ball centre to switch the weld on
-    robot_x: float = 0.15  # m, world x of the trunk at reset (tables span x 0.40-0.70)
+    robot_x: float = 0.15  # m, world x of the trunk at reset (tables span x 0.40-0.70, + dx)
     start_time: float = 0.5  # s standing before the first move
     move_time: float = 1.0  # s per move
     hold_time: float = 0.25  # s pause after each move
@@ -170,11 +176,15 @@ class CarryingEnv(DpcEnv):
     @classmethod
     def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
         """The robot (`arm`; None: `DEFAULT_ARM`) at the origin, the tables `TABLE_HEIGHT` high,
-        ball k on the source table and weld k (off) from it to arm k's grasp site."""
+        ball k on the source table and weld k (off) from it to arm k's grasp site; the tables
+        moved by the mount's offset (module doc)."""
         robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
         spec = objects.robot_scene(robot, cls.TASK)
         offsets = [objects.grasp_offset(a, robot.name, cls.TASK) for a in robot.arms]
-        add_tables_and_balls(spec, cls.TABLE_HEIGHT, n_balls=len(robot.arms))
+        dx, dz = scripts.mount_offset(robot)
+        height = scripts.check_height(cls.TASK, robot, "table top", cls.TABLE_HEIGHT + dz)
+        tables = tuple((x + dx, y) for x, y in TABLE_POS)
+        add_tables_and_balls(spec, height, n_balls=len(robot.arms), table_pos=tables)
         for i, off in enumerate(offsets):
             objects.add_grasp(spec, f"ball{i}", i, off, active=False)
         return spec

@@ -15,6 +15,12 @@ arm shoulder 0.06, elbow -1.09, wrist 1.03 rad (the ball goes 12 cm up, 6 cm bac
 adds its own weight to the ball (`object_mass`); vertical end-effector pushes (`push_force`); no
 payload (the ball is real). Calibration: docs/results.md (Table I).
 
+On another base the scene moves with the arm's mount by construction: the ball sits at the grasp
+site in the home key, `RAISE` is relative to the grasp site's standing position, and the
+trajectory is commanded velocities, so nothing in the scene or the script is absolute, and the
+mount's offset (`scripts.mount_offset`: (dx, dz) m, world frame, x forward, z up; (0, 0) on the
+A1) is never added: relative to the shoulder the ball and the raised pose's IK are the A1's.
+
 Metrics: `ball_gap` (m, largest distance from a grasp site to its ball's centre: the weld's
 slack); the task's success measures are the env's own `pos_sq_err` (the body's distance from the
 desired path: the paper's trajectory tracking) and `ee_sq_err` (`TASK_MEASURES` is empty).

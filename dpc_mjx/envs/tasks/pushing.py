@@ -21,6 +21,15 @@ wrist limits), above the box's 0.2 m top; pitched 60 deg down, the plate's upper
 meets the box face at about 0.17 m, below the 0.2 m where a push against floor friction 0.5
 would tip the box. For `pusher`: shoulder 1.84, elbow -0.49, wrist -0.31 rad.
 
+On another base the scene moves with the arm's mount (`scripts.mount_offset`: (dx, dz) m, world
+frame, x forward, z up, the first arm's mount standing on this base minus on the A1; (0, 0) on
+the A1): the push pose is `PUSH_REACH` + dx ahead and `PUSH_HEIGHT` + dz high, and the box,
+resting on the floor, grows dz taller (its top 2 * BOX_HALF[2] + dz) and dz deeper, its near
+face dx further ahead (`box_geometry`), so that relative to the shoulder the task and its IK pose
+are the A1's; the deeper box is what keeps it from tipping (pushed at height c against floor
+friction mu, a box of half depth d tips when c > d / mu: on a B1 the plate meets it at 0.41 m).
+The goal `push_target` moves with the box's centre.
+
 Metrics (`TASK_MEASURES`, read at the episode's end): `box_dx` (m, the box's displacement
 along x since reset), `box_turn` (rad, |change of the box's heading| since reset: a straight push
 keeps it) and `box_target_dist` (m, box centre to the target point (`push_target`, 0),
@@ -60,7 +69,7 @@ PUSHES = (0.0, 30.0)  # N, vertical end-effector pushes ~ U (the calibration: do
 class PushingConfig(EnvConfig):
     """`EnvConfig` plus the pushing script."""
 
-    push_target: float = 1.5  # m, world x of the box centre's goal (it starts at 0.7 m)
+    push_target: float = 1.5  # m, world x of the box centre's goal (from 0.7 m); + dx (doc)
     arm_move_time: float = 1.0  # s, home -> pushing pose at the start of the episode
     # the box's place: x, y (m) and heading (rad) offsets from `BOX_POS`, each ~ U(-j, j)
     box_jitter: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -94,6 +103,14 @@ def default_config() -> PushingConfig:
     )
 
 
+def box_geometry(dx: float, dz: float) -> tuple[tuple, tuple]:
+    """The box's (x, y) place on the floor (m, world) and half extents (m) on a base whose arm's
+    mount stands (dx, dz) from the A1's (module doc): dz taller and dz deeper, its near face dx
+    further ahead. (`BOX_POS`, `BOX_HALF`) on the A1."""
+    half = (BOX_HALF[0] + dz / 2, BOX_HALF[1], BOX_HALF[2] + dz / 2)
+    return (BOX_POS[0] + dx + dz / 2, BOX_POS[1]), half
+
+
 class PushingEnv(DpcEnv):
     """Pushing: see the module doc."""
 
@@ -102,14 +119,15 @@ class PushingEnv(DpcEnv):
     TASK_MEASURES = ("box_dx", "box_turn", "box_target_dist")
 
     def __init__(self, config: PushingConfig, arm: str | Arm | RobotSpec | None = None):
-        super().__init__(config, arm)
+        super().__init__(config, arm)  # sets `self.offset` (`build_model`)
         model, box = self.model, self.props.box
+        dx, dz = self.offset
         data = scripts.standing_data(model)
         home = np.asarray(model.key_ctrl[0][self.lay.arm_act], np.float32)
         pose = home.copy()
         cols = np.cumsum([0] + [len(a.act) for a in self.lay.arms])
         for k, arm_ in enumerate(self.lay.arms):
-            target = [PUSH_REACH, data.site_xpos[arm_.mount_site][1], PUSH_HEIGHT]
+            target = [PUSH_REACH + dx, data.site_xpos[arm_.mount_site][1], PUSH_HEIGHT + dz]
             q = scripts.solve_ik(
                 model, data, arm_, arm_.ee_site, target, -math.sin(PUSH_PITCH), what="push pose"
             )
@@ -122,13 +140,19 @@ class PushingEnv(DpcEnv):
     @classmethod
     def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
         """The robot (`arm`; None: `DEFAULT_ARM`) with its end effectors touching the box, and
-        the box at rest on the floor (home key)."""
+        the box at rest on the floor (home key), moved and grown by the mount's offset."""
         robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
         spec = objects.robot_scene(robot, cls.TASK)
-        return objects.add_box(spec, BOX_POS, BOX_HALF, BOX_MASS, BOX_FRICTION)
+        dx, dz = scripts.mount_offset(robot)
+        scripts.check_height(cls.TASK, robot, "push pose", PUSH_HEIGHT + dz)
+        pos, half = box_geometry(dx, dz)
+        return objects.add_box(spec, pos, half, BOX_MASS, BOX_FRICTION)
 
-    def build_model(self, arm: str | Arm | RobotSpec | None) -> mujoco.MjModel:
-        return self.scene_spec(arm).compile()
+    def build_model(self, arm: str | Arm | RobotSpec) -> mujoco.MjModel:
+        """`scene_spec(arm)`; keeps the mount's offset (dx, dz) m as `self.offset`."""
+        spec = self.scene_spec(arm)
+        self.offset = scripts.mount_offset(resolve(arm))  # cached by `scene_spec`
+        return spec.compile()
 
     @classmethod
     def check_arm(cls, robot: RobotSpec) -> None:
@@ -153,7 +177,8 @@ class PushingEnv(DpcEnv):
 
     def task_metrics(self, d, dist) -> dict[str, jax.Array]:
         box = d.qpos[self._box_qpos]
-        goal = jp.array([self.config.push_target, 0.0])
+        shift = box_geometry(*self.offset)[0][0] - BOX_POS[0]  # m, the box centre's, along x
+        goal = jp.array([self.config.push_target + shift, 0.0])
         turn = roll_pitch_yaw(box[3:])[2] - dist.task[3]
         return {
             "box_dx": box[0] - self._box_home[0] - dist.task[1],

@@ -26,6 +26,11 @@ is what lifting, pressing or snagging puts on an arm, and its pitch and roll mom
 what u = [f_a, tau_a] describes, so the default is vertical pushes up to 60 N (a 6 kg load at
 most; the shoulder servo's 20 N·m limit is reached near full reach). At 20 s episodes MBC falls
 39-72% on the four arms and the oracle 3-33% (docs/results.md).
+
+On another base these numbers are the A1's scaled by its weight (`envs.registry.WEIGHT_SCALED`:
+pushes, payloads and u's bounds times the ratio of its trunk + legs mass to the A1's; a Go2 up
+to 70 N, a B1 up to 243 N), so that a push is the same share of the robot's weight; calibrated
+per base with MBC against the oracle as above (docs/results.md, "Other bases").
 """
 
 from __future__ import annotations
@@ -53,9 +58,9 @@ class ReachingEnv(DpcEnv):
 
     @classmethod
     def scene_spec(cls, arm: str | Arm | RobotSpec | None = None) -> mujoco.MjSpec:
-        """The robot on a floor, named `a1_<variant>_reaching` (the env itself compiles
-        `robots.build(arm)`, named `a1_<variant>`)."""
+        """The robot on a floor, named `<base>_<variant>_reaching` (the env itself compiles
+        `robots.build(arm)`, named `<base>_<variant>`)."""
         robot = resolve(cls.DEFAULT_ARM if arm is None else arm)
         spec = build_spec(robot)
-        spec.modelname = f"a1_{robot.name}_{cls.TASK}"
+        spec.modelname = f"{spec.modelname}_{cls.TASK}"  # `assemble`'s <base>_<variant>
         return spec

@@ -11,12 +11,21 @@ which is continuous, with zero velocity at each waypoint, and jit-friendly (no s
 `solve_ik` is damped least squares on `mujoco.mj_jacSite` over one arm's hinge joints: a site
 to a world position and, optionally, the world z-component of the site's x axis (its pitch; the
 approach axis of the WidowX-like gripper and the normal of the pusher's plate). The robot is
-posed as it stands under the controller (`standing_data`): trunk level at `STAND_HEIGHT`.
+posed as it stands under the controller (`standing_data`): trunk level at `stand_height`, the
+A1's `STAND_HEIGHT` times the base's home height over the A1's (the controller's desired height
+scales so: `control.base_scaling`).
+
+The tasks' scenes are drawn for the A1 and move with the arm's mount on another base:
+`mount_offset(robot)` is (dx, dz) (m, world frame, x forward, z up), the first arm's mount
+standing on `robot`'s base minus the same arm's mount standing on the A1 (exactly (0, 0) on the
+A1), and each task adds it to its object and target positions and heights, so that relative to
+the arm's shoulder every scene, and every IK solution, is the A1's.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jp
@@ -25,13 +34,16 @@ import numpy as np
 
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import build
 from dpc_mjx.robots.arms import ArmSpec
-from dpc_mjx.robots.layout import ArmLayout
+from dpc_mjx.robots.base_model import A1_HOME_HEIGHT
+from dpc_mjx.robots.layout import ArmLayout, layout
 from dpc_mjx.robots.variants import RobotSpec
 
 # Trunk height (m) of the A1 standing or trotting under the controller (COM height 0.26 m),
 # measured in MJX with the regular arm; the keyframe's 0.27 m is 1.5 cm lower.
 STAND_HEIGHT = 0.285
+MIN_SCENE_HEIGHT = 0.05  # m, lowest a task's shifted height (push pose, table top) may go
 IK_TOL = 5e-3  # m, largest position error accepted for a waypoint
 _IK_ITERS = 200
 _IK_DAMPING = 1e-4  # m², Levenberg-Marquardt damping of J J^T
@@ -93,13 +105,53 @@ def smooth(x: jax.Array) -> jax.Array:
     return x * x * (3.0 - 2.0 * x)
 
 
+def stand_height(model: mujoco.MjModel) -> float:
+    """m, the trunk's height standing under the controller: `STAND_HEIGHT` (the A1's) times
+    h = the model's home trunk height / the A1's (`control.base_scaling`); on the A1 h = 1 and
+    this is `STAND_HEIGHT` exactly."""
+    return STAND_HEIGHT * (float(model.key_qpos[0][2]) / A1_HOME_HEIGHT)
+
+
 def standing_data(model: mujoco.MjModel, x: float = 0.0) -> mujoco.MjData:
-    """The home keyframe with the trunk level at (x, 0, `STAND_HEIGHT`), kinematics computed."""
+    """The home keyframe with the trunk level at (x, 0, `stand_height`), kinematics computed."""
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
-    data.qpos[:7] = [x, 0.0, STAND_HEIGHT, 1.0, 0.0, 0.0, 0.0]
+    data.qpos[:7] = [x, 0.0, stand_height(model), 1.0, 0.0, 0.0, 0.0]
     _kinematics(model, data)
     return data
+
+
+def mount_offset(robot: RobotSpec) -> tuple[float, float]:
+    """(dx, dz) m, world frame (x forward, z up): the first arm's mount site on `robot`'s base
+    minus the same arm's mount site on the A1, each robot standing (`standing_data`, trunk at
+    x = 0). Exactly (0.0, 0.0) on the A1. Each robot is compiled once per process."""
+    if not robot.arms:
+        raise DpcError(f"Variant {robot.name!r} has no arm to place a task's scene by; use an arm.")
+    x, z = _mount_xz(robot)
+    x_a1, z_a1 = _mount_xz(dataclasses.replace(robot, base="a1"))
+    return x - x_a1, z - z_a1
+
+
+@functools.lru_cache(maxsize=32)
+def _mount_xz(robot: RobotSpec) -> tuple[float, float]:
+    """(x, z) m, world: the first arm's mount site of `robot` standing (`standing_data`)."""
+    model = build(robot)
+    pos = standing_data(model).site_xpos[layout(model).arms[0].mount_site]
+    return float(pos[0]), float(pos[2])
+
+
+def check_height(task: str, robot: RobotSpec, what: str, height: float) -> float:
+    """`height` (m above the floor, a task height shifted by `mount_offset`); raises `DpcError`
+    if it is below `MIN_SCENE_HEIGHT` (a base whose arm's mount stands far lower than the
+    A1's)."""
+    if height < MIN_SCENE_HEIGHT:
+        base = getattr(robot.base, "name", robot.base)
+        raise DpcError(
+            f"Task {task!r} on base {base!r}: its {what} would be {height:.3f} m above the floor "
+            f"(below {MIN_SCENE_HEIGHT} m), as the arm's mount stands lower than on the A1. Use a "
+            "base whose trunk stands higher, or mount the arm higher on its trunk."
+        )
+    return height
 
 
 def solve_ik(
