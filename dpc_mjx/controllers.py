@@ -1,6 +1,6 @@
 """The controllers the library compares, one name each: `Controller`, a `StrEnum`.
 
-Each picks the u (the arm's wrench on the A1, [f (N), tau (N·m)] about its COM) that the
+Each picks the u (the arm's wrench on the base, [f (N), tau (N·m)] about its COM) that the
 low-level controller compensates for (`DpcEnv.controller_u`, `run.eval`, `deploy`, the CLI):
 
     mbc       u = 0: the model-based controller alone

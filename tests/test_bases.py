@@ -12,6 +12,7 @@ not move (tests/test_eval_regression.py and the recorded tests guard them too).
 import dataclasses
 
 import jax
+import mujoco
 import numpy as np
 import pytest
 from helpers import fast_jit
@@ -19,11 +20,13 @@ from helpers import fast_jit
 from dpc_mjx import DpcError, assets, make
 from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.controller import make_controller
+from dpc_mjx.envs.registry import WEIGHT_SCALED, get_config
 from dpc_mjx.envs.rollout import run_episodes
-from dpc_mjx.io.shipped import SHIPPED, export_cells
-from dpc_mjx.robots import VARIANTS, build, layout
+from dpc_mjx.io.inference import NumpyPolicy
+from dpc_mjx.io.shipped import SHIPPED, export_cells, shipped_for
+from dpc_mjx.robots import VARIANTS, arm_name, build, layout
 from dpc_mjx.robots.assemble import mount_on
-from dpc_mjx.robots.base_file import LEGS, read_base
+from dpc_mjx.robots.base_file import LEGS, base_file_path, read_base
 from dpc_mjx.run import cli
 
 CHECK = {
@@ -102,6 +105,18 @@ def test_another_base_is_scaled_by_the_stated_rules():
     assert float(ctl.config.balance.mass) == pytest.approx(55.689, abs=1e-3)
 
 
+def test_the_tasks_pushes_payloads_and_u_bounds_follow_the_bases_weight():
+    a1, b1 = get_config("reaching"), get_config("reaching", base="b1")
+    m = 55.689 / 13.741  # the files' trunk + legs, B1 over A1
+    for name in WEIGHT_SCALED:
+        got, want = np.asarray(getattr(b1, name)), np.asarray(getattr(a1, name)) * m
+        np.testing.assert_allclose(got, want, atol=0.01, err_msg=name)  # rounded to 0.01
+    assert get_config("reaching", base="a1") == a1  # the A1's exactly as drawn
+    given = get_config("reaching", base="b1", push_force=(0.0, 60.0))  # given: used as given
+    assert given.push_force == (0.0, 60.0) and given.max_force == b1.max_force
+    assert make("reaching", base="b1").config.u_scale == b1.u_scale  # make uses the same rule
+
+
 def test_an_arm_mount_moves_to_the_same_place_of_another_trunk():
     go2 = read_base("go2")  # its box comes from its collision mesh, off the trunk's origin
     mount = VARIANTS["regular"].arms[0].mount
@@ -109,6 +124,21 @@ def test_an_arm_mount_moves_to_the_same_place_of_another_trunk():
     top = go2.trunk_box_center[2] + go2.trunk_half_extents[2]
     assert moved.pos[2] == pytest.approx(top, abs=_EXACT)  # on the top face, as on the A1
     assert mount_on(read_base("a1"), mount) is mount
+
+
+def test_build_takes_the_base_by_name_path_or_spec():
+    want = _saved(build(dataclasses.replace(VARIANTS["regular"], base="go2")))
+    assert _saved(build("regular", base="go2")) == want
+    assert _saved(build(arm="regular", base=read_base("go2"))) == want
+    assert _saved(build("regular", base=base_file_path("go2"))) == want  # the shipped file
+    assert _saved(build("none", base="a1")) == _saved(build("none"))
+
+
+def _saved(model) -> bytes:
+    """The compiled model's bytes (`mj_saveModel`)."""
+    buffer = np.zeros(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()
 
 
 def test_a_base_the_library_cannot_find_is_refused_before_anything_compiles():
@@ -124,8 +154,22 @@ def test_an_export_is_not_evaluated_on_another_base_than_its_own():
     assert export_cells(SHIPPED, None, ["mbc"], "reaching", {"base": "go2"})[2]["base"] == "go2"
 
 
+@pytest.mark.parametrize(("base", "arm"), [("go2", "regular"), ("b1", "z1")])
+def test_the_shipped_export_of_a_base_is_its_own(base, arm):
+    export = shipped_for(base)
+    assert export != SHIPPED and shipped_for(None) == SHIPPED
+    artefacts, arms, options = export_cells(export, None, ["dpc"], "reaching", {"base": base})
+    assert options["base"] == base and [arm_name(a) for a in arms] == [arm]
+    scaled = get_config("reaching", base=base)  # trained with the base's weight-scaled bounds
+    np.testing.assert_allclose(artefacts.meta["action_scaling"]["u_scale"], scaled.u_scale)
+    runner = NumpyPolicy(export, arm)  # the numpy runner: a finite u within its bounds
+    u = runner.u(np.zeros(runner.input_size, np.float32))
+    assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= np.asarray(scaled.u_scale) + 1e-6)
+
+
 def test_the_commands_take_base(capsys):
-    assert cli.main(["eval", "--base", "go2", "--controllers", "mbc", "dpc"]) != 0  # no compile
+    # go1 has no export of its own: the A1's is refused before anything compiles
+    assert cli.main(["eval", "--base", "go1", "--controllers", "mbc", "dpc"]) != 0
     assert "trained on the base 'a1'" in capsys.readouterr().err
     args = cli._parser().parse_args(["train", "--run", "runs/x", "--base", "go2"])
     assert cli._run_config(args).env_overrides["base"] == "go2"

@@ -1,12 +1,15 @@
 """The ONNX graph of an export (`dpc_mjx.io.onnx_graph`, `dpc-mjx onnx`) computes what
-`NumpyPolicy.u(obs)` computes, u in the policy's frame, for every encoder of the shipped export,
-on observations of real rollouts; the command writes it; without onnx it says how to install it.
+`NumpyPolicy.u(obs)` computes, u in the policy's frame, for every encoder of the shipped exports
+(the A1's, and the Go2's and B1's of `io.shipped.SHIPPED_BASES`), on observations of real
+rollouts; the command writes it; without onnx it says how to install it.
 
-`tests/data/onnx_observations.npz` holds, per arm of the shipped export, 32 raw env observations
+`tests/data/onnx_observations.npz` holds, per shipped encoder (`CELLS`: the A1 export's arms by
+name, the other bases' as "<base>/<arm>"), 32 raw env observations
 [s_body, s_arm, p_arm, u_obs] (float32) of short episodes on the export's task and env options,
 the shipped DPC acting, native MuJoCo C physics (4 envs, seed 31, every 10th of 80 env steps).
-Recorded once with `python tests/test_onnx.py --record` (its `recorded` entry names the commit
-and the jax); re-record only after a deliberate change of the shipped export.
+Recorded with `python tests/test_onnx.py --record`, which records the cells the file lacks and
+keeps the others (its `recorded` entry names the commit and the jax of each recording); delete a
+cell's entry to re-record it after a deliberate change of its export.
 
 The graph runs in float32 (its weights are stored so), NumpyPolicy in float64: they agree to
 `TOL` of max(1, |u|), per entry (u in N and N·m).
@@ -30,12 +33,16 @@ from dpc_mjx.io import onnx_graph, sidecar
 from dpc_mjx.io.export import export
 from dpc_mjx.io.inference import NumpyPolicy
 from dpc_mjx.io.load import load
-from dpc_mjx.io.shipped import SHIPPED
+from dpc_mjx.io.shipped import SHIPPED, SHIPPED_BASES
 from dpc_mjx.policy.policy import POLICY_INPUTS, PolicyState, observation_size
 from dpc_mjx.run import cli
 
 DATA = pathlib.Path(__file__).parent / "data" / "onnx_observations.npz"
 ARMS = list(json.loads((SHIPPED / sidecar.SIDECAR).read_text())["encoders"])
+# every shipped encoder: key -> (export folder, arm); the A1's by the arm's name
+CELLS = {arm: (SHIPPED, arm) for arm in ARMS} | {
+    f"{base}/{arm}": (SHIPPED_BASES[base], arm) for base, arm in (("go2", "regular"), ("b1", "z1"))
+}
 TOL = 1e-5  # max |du| / max(1, |u|), per entry
 SEED, EPISODES, STEPS, EVERY = 31, 4, 80, 10  # the recording's episodes
 README_ONNX = "ort.InferenceSession("  # the README's onnxruntime snippet holds this
@@ -43,40 +50,41 @@ README_ONNX = "ort.InferenceSession("  # the README's onnxruntime snippet holds 
 
 def _observations() -> dict[str, np.ndarray]:
     with np.load(DATA) as data:  # no pickle (np.load's default)
-        return {arm: data[arm] for arm in ARMS}
+        return {key: data[key] for key in CELLS}
 
 
 @pytest.fixture(scope="module")
 def sessions() -> dict:
-    """An onnxruntime session of each shipped arm's graph, built in memory."""
+    """An onnxruntime session of each shipped encoder's graph (`CELLS`), built in memory."""
     ort = pytest.importorskip("onnxruntime", reason="the onnx extra: pip install 'dpc-mjx[onnx]'")
-    art = load(SHIPPED)  # read once for every arm
+    arts = {folder: load(folder) for folder, _ in CELLS.values()}  # each read once
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     return {
-        arm: ort.InferenceSession(
-            onnx_graph.onnx_model(SHIPPED, arm, art).SerializeToString(),
+        key: ort.InferenceSession(
+            onnx_graph.onnx_model(folder, arm, arts[folder]).SerializeToString(),
             options,
             ["CPUExecutionProvider"],
         )
-        for arm in ARMS
+        for key, (folder, arm) in CELLS.items()
     }
 
 
 def test_recording_covers_every_shipped_arm():
     observations = _observations()
-    for arm in ARMS:
-        obs = observations[arm]
-        n = NumpyPolicy(SHIPPED, arm).input_size + 6  # [s_body, s_arm, p_arm, u_obs]
-        assert obs.shape == (32, n) and obs.dtype == np.float32, arm
-        assert np.isfinite(obs).all() and len(np.unique(obs, axis=0)) == 32, arm
+    for key, (folder, arm) in CELLS.items():
+        obs = observations[key]
+        n = NumpyPolicy(folder, arm).input_size + 6  # [s_body, s_arm, p_arm, u_obs]
+        assert obs.shape == (32, n) and obs.dtype == np.float32, key
+        assert np.isfinite(obs).all() and len(np.unique(obs, axis=0)) == 32, key
 
 
-@pytest.mark.parametrize("arm", ARMS)
-def test_graph_matches_numpy_policy(sessions, arm):
-    obs = _observations()[arm]
-    policy = NumpyPolicy(SHIPPED, arm)
-    session = sessions[arm]
+@pytest.mark.parametrize("key", list(CELLS))
+def test_graph_matches_numpy_policy(sessions, key):
+    obs = _observations()[key]
+    folder, arm = CELLS[key]
+    policy = NumpyPolicy(folder, arm)
+    session = sessions[key]
     (inp,), (out,) = session.get_inputs(), session.get_outputs()
     names = sidecar.ONNX  # the shipped sidecar predates its `onnx` entry
     assert (inp.name, out.name) == (names["input"], names["output"])
@@ -85,7 +93,7 @@ def test_graph_matches_numpy_policy(sessions, arm):
     expected = policy.u(obs)  # the policy's frame ('yaw' for the shipped export)
     assert u.dtype == np.float32 and u.shape == expected.shape == (32, 6)
     err = np.abs(u - expected) / np.maximum(1.0, np.abs(expected))
-    assert err.max() <= TOL, f"{arm}: max |du| / max(1, |u|) = {err.max():.2e}"
+    assert err.max() <= TOL, f"{key}: max |du| / max(1, |u|) = {err.max():.2e}"
     assert np.abs(expected).max() > 1.0  # the rollouts make the policy act
 
 
@@ -243,7 +251,8 @@ def test_import_dpc_mjx_imports_no_onnx():
 
 
 def _record() -> None:
-    """Run short episodes of every shipped arm and write `DATA` (see the module docstring)."""
+    """Run short episodes of every shipped encoder the recording lacks and write `DATA`, the
+    recorded cells kept as they are (see the module docstring)."""
     import datetime  # noqa: PLC0415 (recording only)
 
     import jax  # noqa: PLC0415 (recording only)
@@ -253,23 +262,31 @@ def _record() -> None:
     from dpc_mjx.envs.rollout import record_episodes  # noqa: PLC0415 (recording only)
     from dpc_mjx.io.shipped import env_overrides  # noqa: PLC0415 (recording only)
 
-    art = load(SHIPPED)
-    task = art.meta["extra"]["task"]
-    observations = {}
-    for arm in ARMS:
+    kept = {}
+    if DATA.exists():
+        with np.load(DATA) as data:  # no pickle (np.load's default)
+            kept = {k: data[k] for k in data.files}
+    observations = {k: v for k, v in kept.items() if k != "recorded"}
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
+    added = [key for key in CELLS if key not in observations]
+    for key in added:
+        folder, arm = CELLS[key]
+        art = load(folder)
+        task = art.meta["extra"]["task"]
         options = {**env_overrides(art, task), "engine": "native"}
         env = make(task, arm=art.arm_spec(arm), controller=Controller.DPC, **options)
         obs = record_episodes(
             env, EPISODES, STEPS, SEED, lambda _, after: after.obs, art.dpc_policy(arm)
         )  # (STEPS + 1, EPISODES, n), from the reset on
-        observations[arm] = np.asarray(obs[EVERY::EVERY], np.float32).reshape(-1, obs.shape[-1])
-        print(arm, observations[arm].shape, flush=True)
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
-    recorded = f"{datetime.date.today()} on top of {commit}, jax {jax.__version__}"
+        observations[key] = np.asarray(obs[EVERY::EVERY], np.float32).reshape(-1, obs.shape[-1])
+        print(key, observations[key].shape, flush=True)
+    recorded = str(kept.get("recorded", ""))
+    recorded += f"{'; ' if recorded else ''}{', '.join(added)}: {datetime.date.today()} on top "
+    recorded += f"of {commit}, jax {jax.__version__}"
     np.savez_compressed(DATA, recorded=np.array(recorded), **observations)
-    print(f"recorded {DATA}")
+    print(f"recorded {DATA}: {recorded}")
 
 
 if __name__ == "__main__" and sys.argv[1:] == ["--record"]:

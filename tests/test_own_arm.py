@@ -261,7 +261,7 @@ def test_bad_paths_homes_and_bodies_are_refused_before_building(urdf, tmp_path):
             resolve(UrdfArm(str(urdf), home=(("j9", 0.0),)))
         with pytest.raises(DpcError, match="ee_body='hand' is not a body of my_arm.urdf"):
             resolve(UrdfArm(str(urdf), ee_body="hand"))
-        with pytest.raises(DpcError, match="outside the A1 trunk"):
+        with pytest.raises(DpcError, match="outside the reference trunk box"):
             resolve(UrdfArm(str(urdf), mount=Mount((0.5, 0, 0.057))))
     two = _MJCF.replace('<light pos="0 0 1"/>', '<body name="b2"><geom size="0.01"/></body>')
     with pytest.raises(DpcError, match="holds 2 top-level bodies"):

@@ -52,7 +52,7 @@ class Dataset:
     s_drp_next: np.ndarray  # (N, 2) rad/s, roll and pitch rate one env step later
     env_id: np.ndarray | None = None  # (N,) which of the batched envs a row came from
     # (N, 6) privileged, never an input of the adapter or the policy: the oracle's u at t, the
-    # measured mount wrench [f_a (N), tau_a (N·m)] about the A1 COM (`controller.oracle_u`),
+    # measured mount wrench [f_a (N), tau_a (N·m)] about the base's COM (`controller.oracle_u`),
     # world frame
     u_oracle: np.ndarray | None = None
     u_obs: np.ndarray | None = None  # (N, 6) the observer's estimate at t, yaw frame (obs block)

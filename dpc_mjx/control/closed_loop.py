@@ -99,7 +99,7 @@ def make_chunk(
     def tick(ls: LoopState, command, wrench, u_given):
         d = ls.data
         s = read_state(idx, d)
-        known = jp.concatenate(  # the external wrench moved to the A1 COM
+        known = jp.concatenate(  # the external wrench moved to the base's COM
             [wrench[:3], wrench[3:] + jp.cross(d.xipos[trunk] - s.com_pos, wrench[:3])]
         )
         if kind == Controller.MBC:

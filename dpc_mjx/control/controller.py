@@ -243,7 +243,7 @@ def make_controller(
 
 def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
     """(6,) u from the measured mount wrenches: total arm force on the trunk (N) and its torque
-    about the A1 COM (N·m), world frame — the privileged oracle's disturbance estimate."""
+    about the base's COM (N·m), world frame — the privileged oracle's disturbance estimate."""
     f_a, tau_a = jp.zeros(3), jp.zeros(3)
     for arm in lay.arms:
         force, torque = mount_wrench(arm, d)

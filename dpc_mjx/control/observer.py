@@ -6,10 +6,10 @@ the body state the controller reads (`state.BodyState`: COM velocity, trunk orie
 angular velocity, foot positions), the stance ground-reaction forces the balance QP asked for at
 the previous tick (`ControllerState.forces`, the QP's f; the feet have no force sensor) and the
 nominal rigid-body model of the balance QP (`BalanceParams.mass` m and trunk-frame inertia I_B
-about the A1 COM). Same convention and reference point as `controller.oracle_u`: force on the A1
-body (N) and torque about the A1 COM (N·m), world frame.
+about the base's COM). Same convention and reference point as `controller.oracle_u`: force on
+the base (trunk + legs; N) and torque about the base's COM (N·m), world frame.
 
-Momentum (centroidal, the rigid A1 at its home pose; world frame)::
+Momentum (centroidal, the rigid base at its home pose; world frame)::
 
     p = [m v_com, I_w omega],   I_w = R I_B R^T   (kg·m/s, kg·m²/s; R trunk -> world, full R)
 
@@ -47,9 +47,9 @@ trotting at 0.3 m/s the estimate's ripple (std of f_z) measured 4.6, 11, 21, 34 
 the discrete filter is close to its continuous lag) a twentieth of a reaching move and a quarter
 of the shortest push, at a ripple the balance QP tolerates when it feeds r back as u.
 
-Where it fails. It estimates ALL of the wrench on the A1 body that the nominal model does not
-explain, not the arm's alone, and cannot separate them: the arm's wrench, plus the model error
-of the legs (their weight, which tau = J^T f does not carry: the feet push harder than asked;
+Where it fails. It estimates ALL of the wrench on the base (trunk + legs) that the nominal model
+does not explain, not the arm's alone, and cannot separate them: the arm's wrench, plus the model
+error of the legs (their weight, which tau = J^T f does not carry: the feet push harder than asked;
 their mass and inertia moving away from the home pose; swing-leg reactions), plus the difference
 between the commanded and the actual foot forces (torque saturation, slipping, a foot that
 touches down or lifts off off schedule, impacts), plus any other push on the body. Measured on
@@ -105,7 +105,7 @@ class ObserverConfig:
 
 @struct.dataclass
 class ObserverState:
-    """One env's observer (unbatched; world frame, about the A1 COM)."""
+    """One env's observer (unbatched; world frame, about the base's COM)."""
 
     predicted: jax.Array  # (6,) p_0 + sum_{j<k} (F_known_j + r_j) dt: [kg·m/s (3), kg·m²/s (3)]
     estimate: jax.Array  # (6,) r_k = [f (N), tau (N·m)], the estimated external wrench
@@ -114,7 +114,7 @@ class ObserverState:
 
 def momentum(model: BalanceParams, s: BodyState) -> jax.Array:
     """(6,) [m v_com (kg·m/s), I_w omega (kg·m²/s)], I_w = R I_B R^T, world frame."""
-    inertia_w = s.rot @ model.inertia @ s.rot.T  # (3, 3) kg·m², world, about the A1 COM
+    inertia_w = s.rot @ model.inertia @ s.rot.T  # (3, 3) kg·m², world, about the base's COM
     return jp.concatenate([model.mass * s.com_vel, inertia_w @ s.ang_vel])
 
 

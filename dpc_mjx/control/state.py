@@ -19,7 +19,7 @@ from dpc_mjx.robots.layout import Layout
 
 @struct.dataclass
 class BodyState:
-    com_pos: jax.Array  # (3,) m, COM of the A1 (trunk + legs, no arm)
+    com_pos: jax.Array  # (3,) m, COM of the base (trunk + legs, no arm)
     com_vel: jax.Array  # (3,) m/s
     rot: jax.Array  # (3, 3) trunk orientation, body -> world
     ang_vel: jax.Array  # (3,) rad/s, world frame
@@ -61,7 +61,7 @@ def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
     mass = float(model.body_mass[bodies].sum())
     com = sum(model.body_mass[b] * data.xipos[b] for b in bodies) / mass
     inertia = np.zeros((3, 3))
-    for b in bodies:  # parallel-axis sum about the A1 COM, world frame (trunk level, yaw 0)
+    for b in bodies:  # parallel-axis sum about the base's COM, world frame (trunk level, yaw 0)
         rot = data.ximat[b].reshape(3, 3)
         r = data.xipos[b] - com
         inertia += rot @ np.diag(model.body_inertia[b]) @ rot.T

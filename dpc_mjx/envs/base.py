@@ -312,7 +312,7 @@ class DpcEnv(Env):
         return self._u_scale * jp.clip(action, -1.0, 1.0)
 
     def controller_u(self, d, u_policy: jax.Array) -> jax.Array | None:
-        """(6,) u of this tick for the controller (world frame, about the A1 COM), by
+        """(6,) u of this tick for the controller (world frame, about the base's COM), by
         `config.controller`, or None for the observer's own estimate; `u_policy` from
         `policy_u` (used by 'dpc' only)."""
         if self.config.controller == "mbc":

@@ -84,11 +84,14 @@ class EnvConfig:
     # on the same model, threads on the host: sim-to-sim, and the faster path on a CPU)
     engine: str = "mjx"
     # The quadruped: a name of `robots.base_file.NAMED_BASES` ('a1', 'go1', 'go2', 'b1', 'b1-z1')
-    # or the path of its .urdf (or .json) file, read when the env is built (`robots.base_model`)
+    # or the path of its .urdf, MJCF .xml (or .json) file, read when the env is built
+    # (`robots.base_model`).
+    # `make` / `get_config` scale the pushes, payloads and u's bounds below by the base's weight
+    # (`envs.registry.WEIGHT_SCALED`); the numbers written here are the A1's.
     base: str = "a1"
 
     # Action a in [-1, 1]^6 -> u = [f_a, tau_a] = [max_force * a[:3], max_torque * a[3:]]
-    # (per axis x, y, z of `u_frame`; about the A1 COM). A number applies to all three axes.
+    # (per axis x, y, z of `u_frame`; about the base's COM). A number applies to all three axes.
     # The defaults bound the oracle's u on the reaching task with margin (its std there: f 2.6,
     # 2.6, 19 N around a mean f_z of -10 N; tau 3.8, 4.0, 0.44 N·m), so exploration does not
     # throw the robot around with forces no arm exerts. The oracle's own u is not clipped.
@@ -211,7 +214,7 @@ class EnvConfig:
         if not isinstance(self.base, str) or not self.base:
             raise DpcError(
                 f"base={self.base!r}: give a base's name (a1, go1, go2, b1, b1-z1) or the path "
-                "of its .urdf or .json file."
+                "of its .urdf, MJCF .xml or .json file."
             )
         _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
         _int("sensor_delay", self.sensor_delay, 0, 10)

@@ -5,9 +5,9 @@
                   the yaw frame, yaw rate rad/s)
     s_arm  (2 n,): arm joint positions (rad or m), then velocities, every arm joint in layout order
     p_arm  (n_act,): the arm servos' desired joint positions (the reference motion)
-    u_obs  (6,): the disturbance observer's estimate of the external wrench on the A1
+    u_obs  (6,): the disturbance observer's estimate of the external wrench on the base
                  (`control/observer.py`: IMU, encoders and the commanded foot forces, no force
-                 sensor), in the yaw frame: [f (N), tau (N·m) about the A1 COM]
+                 sensor), in the yaw frame: [f (N), tau (N·m) about the base's COM]
 
 `s_body` has the same layout for every variant; `s_arm`/`p_arm` follow the arm (n = 0 for the
 bare A1); `u_obs` is arm-agnostic (what a policy shared by every arm may see). Works on
@@ -39,10 +39,10 @@ S_BODY_NAMES = (
 S_BODY_SIZE = len(S_BODY_NAMES)  # 11
 # Roll and pitch rate (wx, wy; rad/s, trunk frame) inside s_body: the adapter decoder's target.
 S_BODY_DRP = slice(S_BODY_NAMES.index("wx"), S_BODY_NAMES.index("wy") + 1)
-# u_obs's entries, in order: force (N), torque about the A1 COM (N·m), yaw frame
+# u_obs's entries, in order: force (N), torque about the base's COM (N·m), yaw frame
 U_OBS_NAMES = ("obs_fx", "obs_fy", "obs_fz", "obs_tx", "obs_ty", "obs_tz")
 U_OBS_SIZE = len(U_OBS_NAMES)  # 6, the last entries of every env observation
-# Privileged block: the measured mount wrench u = [f_a (N), tau_a (N·m)] about the A1 COM, world
+# Privileged block: the measured mount wrench u = [f_a (N), tau_a (N·m)] about the base's COM, world
 # frame (`controller.oracle_u`); total payload mass (kg); total force applied at the end
 # effectors by pushes, payload weight excluded (N, world).
 PRIVILEGED = {"u_oracle": slice(0, 6), "payload": slice(6, 7), "ee_force": slice(7, 10)}

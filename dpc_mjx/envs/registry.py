@@ -4,10 +4,12 @@ A name is `<task>` or, as before, `<robot>/<task>` ("a1_arm/reaching"). The task
 name to the task's env class, its default config factory and its default arm, all from the
 task's module in `dpc_mjx.envs.tasks` (the class declares `TASK`, `DEFAULT_ARM`, `check_arm`
 and `scene_spec`). `make` checks the name, the arm (known variant, one the task can use, one the
-A1 can hold up) and the overrides, raising `DpcError` before anything is built or compiled, then
-builds the env; `scene_spec` / `build_scene` give a task's scene alone.
+base can hold up) and the overrides, raising `DpcError` before anything is built or compiled, then
+builds the env; `scene_spec` / `build_scene` give a task's scene alone. On a base other than the
+A1, `get_config` scales the task's pushes, payloads and u's bounds by its weight (`WEIGHT_SCALED`).
 
-    task            default arm   scene
+    task            default arm   scene (on the A1; on another base the objects move with the
+                                  arm's mount, `envs.tasks.scripts.mount_offset`)
     reaching        regular       robot on a floor; random arm targets, pushes, payloads
     pushing         pusher        + a free box 0.7 m ahead, pushed with the arm while walking
     carrying        regular       + two tables, a ball per arm carried from one to the other
@@ -19,17 +21,20 @@ builds the env; `scene_spec` / `build_scene` give a task's scene alone.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Callable
 from typing import Any
 
 import mujoco
 
+from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.static_balance import require_static_balance
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import carrying, lifting, pushing, reaching
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import build
 from dpc_mjx.robots.base_file import BaseSpec
 from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 
@@ -71,9 +76,39 @@ def known_tasks() -> list[str]:
     return sorted(TASKS)
 
 
+# The task's disturbances and u's bounds, drawn for the A1, scaled on another base by the ratio
+# m of its trunk + legs mass to the A1's (`control.base_scaling`; exactly 1 on the A1): the same
+# pushes, payloads and u relative to the robot's weight. Fields given as overrides are used as
+# given (N, kg, N·m).
+WEIGHT_SCALED = ("push_force", "payload_mass", "max_force", "max_torque")
+
+
 def get_config(name: str, **overrides: Any) -> EnvConfig:
-    """The task's default config with `overrides`, validated."""
-    return _task(name).default_config().replace(**overrides)
+    """The task's default config with `overrides`, validated; on a base other than the A1, its
+    `WEIGHT_SCALED` defaults scaled by the base's mass ratio."""
+    config = _task(name).default_config().replace(**overrides)
+    m = base_mass_ratio(config.base)
+    if m == 1.0:
+        return config
+    scaled = {
+        k: _times(getattr(config, k), m) for k in WEIGHT_SCALED if k not in overrides
+    }  # fmt: skip
+    return config.replace(**scaled)
+
+
+@functools.cache
+def base_mass_ratio(base: str) -> float:
+    """m: the trunk + legs mass of `base` (a name or a file's path) over the A1's."""
+    if base == "a1":
+        return 1.0
+    return model_scale(build(on_base(resolve("none"), base))).mass
+
+
+def _times(value: float | tuple[float, ...], factor: float) -> float | tuple[float, ...]:
+    """`value` x `factor`, per entry, rounded to 0.01 (N, kg, N·m)."""
+    if isinstance(value, tuple):
+        return tuple(round(float(v) * factor, 2) for v in value)
+    return round(float(value) * factor, 2)
 
 
 def default_arm(name: str) -> str:
@@ -90,7 +125,7 @@ def make(
     """The unbatched env `name` (e.g. "a1_arm/reaching") with arm variant `arm` (a name of
     `dpc_mjx.robots.VARIANTS`, an ArmSpec/UrdfArm or a RobotSpec; None: the task's default arm,
     `default_arm(name)`) on the quadruped `base` (a name of `robots.base_file.NAMED_BASES`, the
-    path of its .urdf or .json file, or a BaseSpec; None: the RobotSpec's, the A1) and config
+    path of its .urdf, .xml or .json file, or a BaseSpec; None: the RobotSpec's, the A1) and config
     `overrides`."""
     task = _task(name)
     robot = resolve(task.default_arm if arm is None else arm)
@@ -98,7 +133,7 @@ def make(
         robot, base = dataclasses.replace(robot, base=base), str(base.path)
     if base is not None:
         overrides = {**overrides, "base": os.fspath(base)}
-    config = task.default_config().replace(**overrides)
+    config = get_config(name, **overrides)
     robot = on_base(robot, config.base)
     task.env_class.check_arm(resolve_arm(robot))  # a bad or unsuitable arm fails here
     return task.env_class(config, robot)

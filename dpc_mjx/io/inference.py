@@ -259,7 +259,7 @@ class NumpyPolicy:
         return np.tanh(_forward(self._pi, (pi_in - mean) / std)[..., : self.action_size])
 
     def u(self, obs, yaw=None) -> np.ndarray:
-        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the A1 COM. Without `yaw`, in the
+        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM. Without `yaw`, in the
         policy's frame (`frame`), what the ONNX graph gives; with the heading `yaw` (rad; () or
         (B,)), in the world frame: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau]
         (a world-frame policy's u as it is)."""

@@ -4,7 +4,7 @@ for the stacks that run ONNX (onnxruntime, TensorRT, C++ and ROS 2 nodes). It co
 
     input  'obs'  float32 (batch, input_size + 6): the raw env observation of the arm,
                   [s_body, s_arm, p_arm, u_obs], input_size = encoders.<arm>.input_size
-    output 'u'    float32 (batch, 6): [f_a (N), tau_a (N m)] about the A1 COM, in the frame
+    output 'u'    float32 (batch, 6): [f_a (N), tau_a (N m)] about the base's COM, in the frame
                   action_scaling.frame ('yaw': heading-aligned, turn f and tau by R_z(yaw) for
                   the world frame; 'world')
 

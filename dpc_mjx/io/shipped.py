@@ -2,6 +2,7 @@
 imposes on a use, and the cells an evaluation of it covers.
 
     SHIPPED, SHIPPED_PAPER                 the exports in the package (docs/results.md)
+    shipped_for(base)                      the shipped export trained on a base (SHIPPED_BASES)
     env_overrides(artefacts, task)         the env options it was trained with, for a use on `task`
     export_cells(export_dir, arms, ...)    its artefacts, the arms to evaluate, the env options
 """
@@ -21,10 +22,19 @@ from dpc_mjx.serialization import tuples
 SHIPPED = pathlib.Path(__file__).parents[1] / "artefacts" / "regular"  # the trained run's export
 # the paper's recipe (`RECIPES["paper"]`: SAC from a random actor, no oracle label for the actor)
 SHIPPED_PAPER = SHIPPED.with_name("regular-paper")
+# The default recipe on other bases (`dpc-mjx train --base go2`; `--base b1 --arm z1`, native
+# engine): docs/results.md, "Other bases: the reaching task"
+SHIPPED_BASES = {"a1": SHIPPED, "go2": SHIPPED.with_name("go2"), "b1": SHIPPED.with_name("b1")}
 # The env options that belong to the policy rather than the task (they follow an export to any
 # task), with the values of exports written before they existed
 _POLICY_ENV_BEFORE = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
 _CHOSEN_PER_USE = ("controller", "engine")  # env options an export's env_config never imposes
+
+
+def shipped_for(base: str | None) -> pathlib.Path:
+    """The shipped export trained on `base` (a named base; None: the A1's). A base without one
+    gets the A1's, which `export_cells` refuses for DPC, naming the fix."""
+    return SHIPPED_BASES.get(base or "a1", SHIPPED)
 
 
 def env_overrides(artefacts: Artefacts, task: str | None = None) -> dict:
@@ -65,8 +75,10 @@ def export_cells(
         trained_on = (artefacts.meta.get("env_config") or {}).get("base", "a1")
         if options.get("base", trained_on) != trained_on:
             raise DpcError(
-                f"The export {export_dir} was trained on the base {trained_on!r}; its policy "
-                f"and decoder do not carry to {options['base']!r}. Evaluate it on "
-                f"{trained_on!r} (drop --base), or train on that base (dpc-mjx train --base)."
+                f"The export {export_dir} was trained on the base {trained_on!r}; its encoders "
+                f"learned that base's dynamics, not {options['base']!r}'s. Evaluate it on "
+                f"{trained_on!r} (drop --base), train on that base (dpc-mjx train --base), or "
+                "give its policy a new encoder trained on that base (experiments/carry_over.py: "
+                "the A1's carries to go1 so, docs/results.md)."
             )
     return artefacts, arms, options

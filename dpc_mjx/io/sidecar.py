@@ -137,7 +137,7 @@ def build(
             "u_scale": list(scaling.u_scale),
             "frame": scaling.u_frame,
             "u": f"[f_a (N), tau_a (N m)] = u_scale * a (per component), {scaling.u_frame} "
-            "frame, about the A1 COM",
+            "frame, about the base's COM",
         },
         "onnx": {
             **ONNX,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import mujoco
 import numpy as np
@@ -10,7 +11,9 @@ import numpy as np
 from dpc_mjx.robots import a1, arms, base_model
 from dpc_mjx.robots.arms import Mount
 from dpc_mjx.robots.base_file import BaseSpec
-from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
+from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
+
+Base = str | os.PathLike | BaseSpec  # a named base, a file's path or a spec
 
 HOME_KEY = "home"
 
@@ -25,9 +28,17 @@ def arm_prefix(i: int) -> str:
     return f"arm{i}/"
 
 
-def robot_spec(robot: str | Arm | RobotSpec) -> mujoco.MjSpec:
-    """The robot alone (no floor): base, arms attached at their mounts, options, home keyframe."""
-    return assemble(resolve(robot))
+def robot_spec(arm: str | Arm | RobotSpec, base: Base | None = None) -> mujoco.MjSpec:
+    """The robot alone (no floor): base, arms attached at their mounts, options, home keyframe.
+    `arm`: a variant's name (`"none"` too), an `ArmSpec`/`UrdfArm` or a `RobotSpec`; `base`: a
+    named base, a file's path or a `BaseSpec` (None: the RobotSpec's, the A1)."""
+    robot = resolve(arm)
+    return assemble(robot if base is None else on_base(robot, _base_argument(base)))
+
+
+def _base_argument(base: Base) -> str | BaseSpec:
+    """`base` as `variants.on_base` takes it (a path object as its string)."""
+    return base if isinstance(base, BaseSpec) else os.fspath(base)
 
 
 def assemble(robot: RobotSpec) -> mujoco.MjSpec:
@@ -99,14 +110,16 @@ def add_scene(spec: mujoco.MjSpec) -> mujoco.MjSpec:
     return spec
 
 
-def build_spec(robot: str | Arm | RobotSpec) -> mujoco.MjSpec:
-    """Robot and scene as one spec, ready to compile or edit."""
-    return add_scene(robot_spec(robot))
+def build_spec(arm: str | Arm | RobotSpec, base: Base | None = None) -> mujoco.MjSpec:
+    """Robot and scene as one spec, ready to compile or edit (`robot_spec`'s arguments)."""
+    return add_scene(robot_spec(arm, base))
 
 
-def build(robot: str | Arm | RobotSpec) -> mujoco.MjModel:
-    """Compile a variant: a name from `VARIANTS`, an `ArmSpec`/`UrdfArm`, or a `RobotSpec`."""
-    return build_spec(robot).compile()
+def build(arm: str | Arm | RobotSpec, base: Base | None = None) -> mujoco.MjModel:
+    """Compile a robot: `arm` a variant's name (`"none"` too), an `ArmSpec`/`UrdfArm` or a
+    `RobotSpec`, on `base` (a named base, a file's path or a `BaseSpec`; None: the A1, or the
+    RobotSpec's), e.g. `build("regular", base="go2")`."""
+    return build_spec(arm, base).compile()
 
 
 def mount_on(base: BaseSpec, mount: Mount) -> Mount:

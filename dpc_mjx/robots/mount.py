@@ -1,6 +1,11 @@
-"""What every arm shares where it meets the A1: its mount (`Mount`: where its base sits on the
+"""What every arm shares where it meets the base: its mount (`Mount`: where its base sits on the
 trunk), the mount site with its force and torque sensors, the end-effector site's name, and its
 joints' position servos (`Servo`), armature and damping.
+
+A `Mount` is written on the reference trunk box, the A1's (`robots.a1.TRUNK_HALF_EXTENTS`, the
+frame every named variant's mount is written in), and checked against it; `assemble.mount_on`
+moves it to the same place of any base's trunk box (each coordinate scaled by the ratio of the
+boxes' half extents), so a mount inside the reference box is inside every base's trunk.
 
 MuJoCo's force/torque sensors read the wrench the *trunk exerts on the arm* at the mount site, in
 the site frame; `dpc_mjx.robots.layout` turns this into the wrench the arm puts on the trunk.
@@ -40,9 +45,9 @@ class Mount:
         for axis, v, half in zip("xyz", self.pos, a1.TRUNK_HALF_EXTENTS, strict=True):
             if abs(v) > half + 1e-9:
                 raise DpcError(
-                    f"{what}: pos {axis}={v:.3f} m is outside the A1 trunk (|{axis}| <= {half} m); "
-                    f"mount the arm on the trunk, e.g. on its top face "
-                    f"z={a1.TRUNK_HALF_EXTENTS[2]}."
+                    f"{what}: pos {axis}={v:.3f} m is outside the reference trunk box (the A1's, "
+                    f"|{axis}| <= {half} m, mapped onto any base's trunk by `mount_on`); mount "
+                    f"the arm on the trunk, e.g. on its top face z={a1.TRUNK_HALF_EXTENTS[2]}."
                 )
 
 

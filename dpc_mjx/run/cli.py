@@ -20,7 +20,7 @@
     dpc-mjx mjcf                       write every variant's MJCF into mjcf/
     dpc-mjx base go2 --out my_dog.json what a base's file gives, as a JSON to correct
 
-`--base go2` (a named base or your quadruped's .urdf/.json) on train, transfer, eval, sim2sim,
+`--base go2` (a named base or your quadruped's .urdf/.xml/.json) on train, transfer, eval, sim2sim,
 render and view: the same as `--env base=go2` (`--set env.base=go2` for train).
 
 Hyperparameters are not flags: `--set name=value ...` overrides any `RunConfig` field by dotted
@@ -100,11 +100,12 @@ def _transfer(args: argparse.Namespace) -> None:
 
 
 def _eval(args: argparse.Namespace) -> None:
-    from dpc_mjx.io.shipped import SHIPPED  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.io.shipped import shipped_for  # noqa: PLC0415 (subcommand handler)
     from dpc_mjx.run.pipeline import evaluate_export  # noqa: PLC0415 (subcommand handler)
 
     prefix = "native-" if args.engine == "native" else ""
-    evaluate_export(args.export or SHIPPED, **_cells(args, prefix), env=_env_options(args))
+    export = args.export or shipped_for(args.base)
+    evaluate_export(export, **_cells(args, prefix), env=_env_options(args))
 
 
 def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
@@ -124,10 +125,11 @@ def _env_options(args: argparse.Namespace) -> dict:
 
 
 def _sim2sim(args: argparse.Namespace) -> None:
-    from dpc_mjx.io.shipped import SHIPPED  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.io.shipped import shipped_for  # noqa: PLC0415 (subcommand handler)
     from dpc_mjx.run.sim2sim import sim2sim  # noqa: PLC0415 (subcommand handler)
 
-    sim2sim(args.export or SHIPPED, **_cells(args, "sim2sim-"), env=env_options(args))
+    export = args.export or shipped_for(args.base)
+    sim2sim(export, **_cells(args, "sim2sim-"), env=env_options(args))
 
 
 def _sweep(args: argparse.Namespace) -> None:
@@ -268,7 +270,8 @@ def _evaluation_commands(sub) -> None:
 
 
 def _eval_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--export", help="an export folder (default: the shipped artefacts/regular)")
+    shipped = "default: the shipped export of --base, artefacts/regular (a1), go2 or b1"
+    p.add_argument("--export", help=f"an export folder ({shipped})")
     arms = "arms: encoder names, variants, arm files or descriptions (default: the policy's arm)"
     p.add_argument("--arms", nargs="+", help=arms)
     p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)

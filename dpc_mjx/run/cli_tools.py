@@ -30,7 +30,7 @@ def parse_sets(items: list[str]) -> dict:
     return out
 
 
-BASE_HELP = "the quadruped: a1 (default), go1, go2, b1, b1-z1, or your .urdf/.json file"
+BASE_HELP = "the quadruped: a1 (default), go1, go2, b1, b1-z1, or your .urdf/.xml/.json file"
 
 
 def add_env_options(p: argparse.ArgumentParser, help_text: str | None = None) -> None:
@@ -186,7 +186,8 @@ def tool_commands(sub) -> None:
 
 def _base_command(sub) -> None:
     """base (issue 27): a quadruped base's file as read, and its JSON to correct."""
-    p = sub.add_parser("base", help="what is inferred of a quadruped base's URDF, as a JSON")
-    p.add_argument("file", help="a named base (a1 go1 go2 b1 b1-z1), a .urdf or a base .json")
+    p = sub.add_parser("base", help="what is inferred of a quadruped base's file, as a JSON")
+    what = "a named base (a1 go1 go2 b1 b1-z1), a .urdf, an MJCF .xml or a base .json"
+    p.add_argument("file", help=what)
     p.add_argument("--out", help="write the JSON that reproduces it here, e.g. my_dog.json")
     p.set_defaults(handler=_base)
