@@ -126,7 +126,7 @@ def _controller_parts(t: Timer, env, d, cs, command, u, noise):
         start = jp.where((cs.stance & ~p.stance)[:, None], s.foot_pos, cs.swing_start)
         target = swing.raibert_foothold(
             s.hip_pos, s.com_vel, p.vel_des, p.yaw_rate_des, s.com_pos,
-            cfg.gait.stance_time, cfg.raibert_k,
+            cfg.gait.stance_time, cfg.raibert_k, ctl.lay.foot_radius,
         )  # fmt: skip
         p_des, v_des = swing.swing_trajectory(
             start, target, p.progress, cfg.gait.swing_time, cfg.swing_height

@@ -187,6 +187,7 @@ class LowLevelController:
             s.com_pos,
             cfg.gait.stance_time,
             cfg.raibert_k,
+            self.lay.foot_radius,  # m: the foothold's z, the foot sphere's centre on the ground
         )
         p_des, v_des = swing.swing_trajectory(
             swing_start, target, progress, cfg.gait.swing_time, cfg.swing_height

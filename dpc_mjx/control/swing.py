@@ -16,14 +16,15 @@ def raibert_foothold(
     yaw_rate_des: jax.Array,
     com_pos: jax.Array,
     stance_time: jax.Array,
-    k_vel: float = 0.03,
-    foot_radius: float = 0.02,
+    k_vel: float,
+    foot_radius: float,
 ) -> jax.Array:
     """(4, 3) footholds: below each hip, shifted by half a stance of motion plus velocity feedback.
 
     p = p_hip + v_des_hip T_st / 2 + k_vel (v - v_des), with v_des_hip the desired velocity of the
-    hip (COM velocity plus the yaw rate's tangential part); z is the foot-sphere centre height.
-    `hip_pos` (4, 3), `com_vel`/`com_vel_des` (3,) world; `yaw_rate_des` rad/s.
+    hip (COM velocity plus the yaw rate's tangential part); z is the foot sphere's centre on the
+    ground, `foot_radius` (m, the base's). `hip_pos` (4, 3), `com_vel`/`com_vel_des` (3,) world;
+    `yaw_rate_des` rad/s; `k_vel` s (`ControllerConfig.raibert_k`).
     """
     lever = hip_pos - com_pos  # (4, 3)
     spin = jp.stack([-lever[:, 1], lever[:, 0], jp.zeros(4)], axis=-1) * yaw_rate_des
