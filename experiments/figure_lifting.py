@@ -28,7 +28,7 @@ from dpc_mjx.envs.rollout import record_episodes, zero_policy
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.plots import lifting_trajectory
 
-TASK = "a1_arm/lifting"
+TASK = "lifting"
 DT = 0.02  # s per env step
 
 

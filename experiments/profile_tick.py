@@ -248,7 +248,7 @@ def _estimator(t: Timer, d, batch: int):
 
 def profile(controller: str, args) -> None:
     print(f"\n## reaching, arm regular, controller {controller}, batch {args.batch}\n", flush=True)
-    env = dpc_mjx.make("a1_arm/reaching", arm="regular", controller=controller)
+    env = dpc_mjx.make("reaching", arm="regular", controller=controller)
     t = Timer(args.calls, args.repeats)
     state, actions = _states(env, args.batch, args.warmup, controller)
     d, info, dist, u_pol, noise, targets, u, keys = _inputs(env, state, actions)
@@ -256,7 +256,7 @@ def profile(controller: str, args) -> None:
     t.row("dispatch (empty jitted call)", lambda x: x + 1.0, d.time, per_tick=False)
     for engine in args.engines:
         e = env if engine == env.config.engine else dpc_mjx.make(
-            "a1_arm/reaching", arm="regular", controller=controller, engine=engine
+            "reaching", arm="regular", controller=controller, engine=engine
         )  # fmt: skip
         t.row(f"env.step ({engine})", e.step, state, actions, per_tick=False)
         t.row(f"physics step ({engine})", e.physics.step, d, per_tick=True)

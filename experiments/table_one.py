@@ -97,7 +97,7 @@ def main() -> None:
             args.export,
             arms=[arm],
             controllers=list(CONTROLLERS),
-            task=f"a1_arm/{task}",
+            task=task,
             episodes=args.episodes,
             seed=args.seed,
             out=out / f"{task}-{arm}.md",

@@ -234,13 +234,14 @@ def test_config_parts_read_and_replace_by_the_same_flat_names():
         config.replace(sensors={"sensor_noise": -1.0})  # validated as the flat field is
 
 
-def test_tasks_answer_to_their_short_names():
-    """`make("reaching")` is `make("a1_arm/reaching")`: the robot prefix is optional."""
+def test_tasks_answer_to_their_old_names():
+    """`make("a1_arm/reaching")` is `make("reaching")`: the old robot prefix is an alias."""
+    assert "reaching" in registry.known_tasks()
     for task in registry.known_tasks():
-        short = task.split("/", 1)[1]
-        assert registry.get_config(short) == registry.get_config(task)
-        assert registry.default_arm(short) == registry.default_arm(task)
-        assert registry.task_name(short) == registry.task_name(task) == task
+        old = f"a1_arm/{task}"
+        assert registry.get_config(old) == registry.get_config(task)
+        assert registry.default_arm(old) == registry.default_arm(task)
+        assert registry.task_name(old) == registry.task_name(task) == task
     with pytest.raises(DpcError, match=r"known tasks: \[.*'reaching'"):
         registry.get_config("juggling")
 

@@ -35,7 +35,7 @@ _G = 9.81
 
 def _build(task: str, arm: str | None = None) -> mujoco.MjModel:
     """Task `task`'s scene alone (robot at the origin), as its module builds it."""
-    return registry.build_scene(f"{registry.ROBOT}/{task}", arm)
+    return registry.build_scene(task, arm)
 
 
 @pytest.fixture(scope="module", params=_SCENES, ids="-".join)

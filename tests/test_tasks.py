@@ -269,17 +269,17 @@ def test_unsuitable_arms_fail_before_anything_is_built(monkeypatch):
 
 def test_registry_names_and_configs():
     assert registry.known_tasks() == [
-        "a1_arm/carrying",
-        "a1_arm/carrying_high",
-        "a1_arm/lifting",
-        "a1_arm/pushing",
+        "carrying",
+        "carrying_high",
+        "lifting",
+        "pushing",
         DEFAULT_TASK,
     ]
     for task, arm in {**_DEFAULTS, "reaching": "regular"}.items():
-        assert registry.default_arm(f"a1_arm/{task}") == arm
-    cfg = registry.get_config("a1_arm/carrying_high", grasp_threshold=0.02)
+        assert registry.default_arm(task) == arm
+    cfg = registry.get_config("carrying_high", grasp_threshold=0.02)
     assert isinstance(cfg, carrying.CarryingConfig) and cfg.grasp_threshold == 0.02
-    assert registry.get_config("a1_arm/pushing").push_force == pushing.PUSHES
+    assert registry.get_config("pushing").push_force == pushing.PUSHES
 
 
 def test_the_controller_models_the_bare_a1_on_every_scene():

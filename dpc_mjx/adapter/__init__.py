@@ -1,7 +1,7 @@
 """The latent dynamic adapter (paper §III-B): a forward model whose 2-D latent z summarises what
 the arm does to the body, and the transfer of that latent to a new arm.
 
-    data = collect(make("a1_arm/reaching", arm="regular", controller="mbc"), samples=100_000)
+    data = collect(make("reaching", arm="regular", controller="mbc"), samples=100_000)
     adapter = train(data)                                   # encoder + decoder
     enc, hist = transfer(collect(make(..., arm="so100", controller="mbc"), 30_000),
                          adapter.decoder)                   # new encoder, frozen decoder

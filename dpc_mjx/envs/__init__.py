@@ -1,4 +1,4 @@
-"""DPC environments (brax API): `make("a1_arm/reaching", arm="regular", **overrides)`.
+"""DPC environments (brax API): `make("reaching", arm="regular", **overrides)`.
 
 - `base.DpcEnv`: one env, unbatched and pure (`reset(rng)`, `step(state, action)`);
 - `config.EnvConfig`: every option, with units and sampling distributions;

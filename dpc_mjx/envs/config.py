@@ -1,7 +1,7 @@
 """Environment configuration: one frozen dataclass, validated before anything is compiled.
 
 Every task has its own default (`dpc_mjx.envs.tasks.reaching.default_config()`); override fields
-by keyword (`dpc_mjx.make("a1_arm/reaching", arm="regular", controller="mbc")`) or with
+by keyword (`dpc_mjx.make("reaching", arm="regular", controller="mbc")`) or with
 `config.replace(...)`. Ranges are `(low, high)` tuples of a uniform distribution, `# ~ U(low, high)`
 in the field comments; a range with low == high is a constant.
 

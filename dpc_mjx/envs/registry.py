@@ -1,6 +1,7 @@
 """Tasks by name: `make("reaching", arm="regular", **overrides)`.
 
-A name is `<task>` or, as before, `<robot>/<task>` ("a1_arm/reaching"). The task table maps a
+A name is `<task>` ("reaching"; any base: `make(..., base=)`), or, as before, "a1_arm/<task>"
+(`LEGACY_PREFIX`, an alias: exports written before record it). The task table maps a
 name to the task's env class, its default config factory and its default arm, all from the
 task's module in `dpc_mjx.envs.tasks` (the class declares `TASK`, `DEFAULT_ARM`, `check_arm`
 and `scene_spec`). `make` checks the name, the arm (known variant, one the task can use, one the
@@ -38,8 +39,8 @@ from dpc_mjx.robots import build
 from dpc_mjx.robots.base_file import BaseSpec
 from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 
-ROBOT = "a1_arm"
-DEFAULT_TASK = "a1_arm/reaching"  # the training task: every run, evaluation and export's default
+LEGACY_PREFIX = "a1_arm/"  # tasks' names before any base: "a1_arm/reaching" is "reaching"
+DEFAULT_TASK = "reaching"  # the training task: every run, evaluation and export's default
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,8 +59,8 @@ def register(
     default_config: Callable[[], EnvConfig],
     default_arm: str = "regular",
 ) -> None:
-    """Make `f"{ROBOT}/{task}"` available to `make`."""
-    TASKS[f"{ROBOT}/{task}"] = Task(env_class, default_config, default_arm)
+    """Make `task` available to `make`."""
+    TASKS[task] = Task(env_class, default_config, default_arm)
 
 
 for _env, _config in (  # each class names its task and default arm
@@ -122,7 +123,7 @@ def make(
     base: str | os.PathLike | BaseSpec | None = None,
     **overrides: Any,
 ) -> DpcEnv:
-    """The unbatched env `name` (e.g. "a1_arm/reaching") with arm variant `arm` (a name of
+    """The unbatched env `name` (e.g. "reaching") with arm variant `arm` (a name of
     `dpc_mjx.robots.VARIANTS`, an ArmSpec/UrdfArm or a RobotSpec; None: the task's default arm,
     `default_arm(name)`) on the quadruped `base` (a name of `robots.base_file.NAMED_BASES`, the
     path of its .urdf, .xml or .json file, or a BaseSpec; None: the RobotSpec's, the A1) and config
@@ -169,14 +170,16 @@ def build_scene(name: str, arm: str | Arm | RobotSpec | None = None) -> mujoco.M
 
 
 def task_name(name: str) -> str:
-    """The full name of task `name` ("reaching" -> "a1_arm/reaching"), to compare names."""
-    return name if name in TASKS or "/" in name else f"{ROBOT}/{name}"
+    """The name of task `name` ("a1_arm/reaching" -> "reaching"), to compare names."""
+    return name.removeprefix(LEGACY_PREFIX)
 
 
 def _task(name: str) -> Task:
-    """The task `name`, by its full name ("a1_arm/reaching") or its short one ("reaching")."""
+    """The task `name`, by its name ("reaching") or its old one ("a1_arm/reaching")."""
     task = TASKS.get(task_name(name))
     if task is None:
-        short = sorted(n.split("/", 1)[1] for n in TASKS)
-        raise DpcError(f"Unknown task {name!r}; known tasks: {short} (or {known_tasks()}).")
+        raise DpcError(
+            f"Unknown task {name!r}; known tasks: {known_tasks()} (the old names "
+            f"'{LEGACY_PREFIX}<task>' work too)."
+        )
     return task

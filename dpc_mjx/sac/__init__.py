@@ -14,7 +14,7 @@ acting through u = [f_a, tau_a].
 The trained policy as data (`PolicyState`, `dpc_policy`) and the oracle regression that starts it
 are `dpc_mjx.policy` (`sac.policy` and `sac.warm_start` re-export them).
 
-env = LatentObsWrapper(make("a1_arm/reaching", arm="regular"), adapter.config, adapter.encoder)
+env = LatentObsWrapper(make("reaching", arm="regular"), adapter.config, adapter.encoder)
 result = train(env, SacConfig(num_timesteps=500_000), run_dir="runs/dpc")
 policy = dpc_policy(adapter.config, adapter.encoder, result.policy)   # raw obs -> action
 """

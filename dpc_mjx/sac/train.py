@@ -16,7 +16,7 @@ the host:
 
 `restore_policy` reads a run's policy back without training.
 
-    env = LatentObsWrapper(make("a1_arm/reaching", arm="regular"), adapter.config, adapter.encoder)
+    env = LatentObsWrapper(make("reaching", arm="regular"), adapter.config, adapter.encoder)
     result = train(env, SacConfig(num_timesteps=500_000), run_dir="runs/x")
 """
 
