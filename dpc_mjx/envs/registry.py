@@ -22,21 +22,18 @@ A1, `get_config` scales the task's pushes, payloads and u's bounds by its weight
 from __future__ import annotations
 
 import dataclasses
-import functools
 import os
 from collections.abc import Callable
 from typing import Any
 
 import mujoco
 
-from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.static_balance import require_static_balance
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import carrying, lifting, pushing, reaching
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import build
-from dpc_mjx.robots.base_file import BaseSpec
+from dpc_mjx.robots.base_file import BaseSpec, read_base
 from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 
 LEGACY_PREFIX = "a1_arm/"  # tasks' names before any base: "a1_arm/reaching" is "reaching"
@@ -78,7 +75,7 @@ def known_tasks() -> list[str]:
 
 
 # The task's disturbances and u's bounds, drawn for the A1, scaled on another base by the ratio
-# m of its trunk + legs mass to the A1's (`control.base_scaling`; exactly 1 on the A1): the same
+# m of its trunk + legs mass to the A1's (`base_mass_ratio`; exactly 1 on the A1): the same
 # pushes, payloads and u relative to the robot's weight. Fields given as overrides are used as
 # given (N, kg, N·m).
 WEIGHT_SCALED = ("push_force", "payload_mass", "max_force", "max_torque")
@@ -97,12 +94,12 @@ def get_config(name: str, **overrides: Any) -> EnvConfig:
     return config.replace(**scaled)
 
 
-@functools.cache
 def base_mass_ratio(base: str) -> float:
-    """m: the trunk + legs mass of `base` (a name or a file's path) over the A1's."""
+    """m: the trunk + legs mass of `base` (a name or a file's path; `BaseSpec.base_mass`, read
+    again when the file changes) over the A1's: `control.base_scaling`'s mass ratio."""
     if base == "a1":
         return 1.0
-    return model_scale(build(on_base(resolve("none"), base))).mass
+    return read_base(base).base_mass / read_base("a1").base_mass
 
 
 def _times(value: float | tuple[float, ...], factor: float) -> float | tuple[float, ...]:
