@@ -41,7 +41,7 @@ def _saved(model: mujoco.MjModel) -> bytes:
 def _a1_reference(task: str, arm: str) -> mujoco.MjSpec:
     """The A1's scene as the module constants build it, without the mount's offset."""
     robot = resolve(arm)
-    spec = objects.robot_scene(robot, registry.task_name(task).split("/")[1])
+    spec = objects.robot_scene(robot, registry.task_name(task))
     if task == "pushing":
         return objects.add_box(
             spec, pushing.BOX_POS, pushing.BOX_HALF, pushing.BOX_MASS, pushing.BOX_FRICTION

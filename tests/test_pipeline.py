@@ -7,6 +7,7 @@ import pytest
 
 from dpc_mjx import DpcError, io
 from dpc_mjx.envs import DEFAULT_TASK
+from dpc_mjx.envs.registry import task_name
 from dpc_mjx.io.serialization import jsonable
 from dpc_mjx.run import cli, pipeline
 from dpc_mjx.run import eval as run_eval
@@ -101,7 +102,8 @@ def test_shipped_artefacts_load_and_are_the_default_recipe():
     # its own arm first, then the encoders transferred to it (`dpc-mjx transfer --samples 10000`)
     assert list(art.meta["encoders"]) == ["regular", *TRANSFERRED]
     assert all(art.arm_spec(arm) == arm for arm in art.encoders)
-    assert art.meta["extra"]["task"] == DEFAULT_TASK == RunConfig().task
+    # its sidecar names the task by its old name, "a1_arm/reaching" (`registry.LEGACY_PREFIX`)
+    assert task_name(art.meta["extra"]["task"]) == DEFAULT_TASK == RunConfig().task
     defaults = RunConfig()
     # read with today's SacConfig (options added since default to what the export did)
     assert SacConfig(**tuples(art.meta["sac_config"])) == defaults.sac
