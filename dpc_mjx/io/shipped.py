@@ -78,7 +78,7 @@ def export_cells(
                 f"The export {export_dir} was trained on the base {trained_on!r}; its encoders "
                 f"learned that base's dynamics, not {options['base']!r}'s. Evaluate it on "
                 f"{trained_on!r} (drop --base), train on that base (dpc-mjx train --base), or "
-                "give its policy a new encoder trained on that base (experiments/carry_over.py: "
-                "the A1's carries to go1 so, docs/results.md)."
+                "give its policy a new encoder trained on that base (experiments/carry_over.py; "
+                "the A1's policy carries to a Go1 so, docs/results.md)."
             )
     return artefacts, arms, options
