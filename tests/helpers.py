@@ -4,6 +4,8 @@ import contextlib
 import functools
 
 import jax
+import mujoco
+import numpy as np
 from brax.envs.base import Wrapper
 
 # XLA's backend optimisation off: compiles ~40% shorter, steps ~10x slower. For tests that compile
@@ -58,3 +60,10 @@ def recorded_compiles():
         yield compiles
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def model_bytes(model: mujoco.MjModel) -> bytes:
+    """A compiled model's bytes (`mj_saveModel`), to compare two models exactly."""
+    buffer = np.zeros(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()

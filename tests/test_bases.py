@@ -12,10 +12,9 @@ not move (tests/test_eval_regression.py and the recorded tests guard them too).
 import dataclasses
 
 import jax
-import mujoco
 import numpy as np
 import pytest
-from helpers import fast_jit
+from helpers import fast_jit, model_bytes
 
 from dpc_mjx import DpcError, assets, make
 from dpc_mjx.control.base_scaling import model_scale
@@ -127,18 +126,11 @@ def test_an_arm_mount_moves_to_the_same_place_of_another_trunk():
 
 
 def test_build_takes_the_base_by_name_path_or_spec():
-    want = _saved(build(dataclasses.replace(VARIANTS["regular"], base="go2")))
-    assert _saved(build("regular", base="go2")) == want
-    assert _saved(build(arm="regular", base=read_base("go2"))) == want
-    assert _saved(build("regular", base=base_file_path("go2"))) == want  # the shipped file
-    assert _saved(build("none", base="a1")) == _saved(build("none"))
-
-
-def _saved(model) -> bytes:
-    """The compiled model's bytes (`mj_saveModel`)."""
-    buffer = np.zeros(mujoco.mj_sizeModel(model), np.uint8)
-    mujoco.mj_saveModel(model, None, buffer)
-    return buffer.tobytes()
+    want = model_bytes(build(dataclasses.replace(VARIANTS["regular"], base="go2")))
+    assert model_bytes(build("regular", base="go2")) == want
+    assert model_bytes(build(arm="regular", base=read_base("go2"))) == want
+    assert model_bytes(build("regular", base=base_file_path("go2"))) == want  # the shipped file
+    assert model_bytes(build("none", base="a1")) == model_bytes(build("none"))
 
 
 def test_a_base_the_library_cannot_find_is_refused_before_anything_compiles():

@@ -14,7 +14,7 @@ import jax
 import mujoco
 import numpy as np
 import pytest
-from helpers import fast_jit
+from helpers import fast_jit, model_bytes
 
 from dpc_mjx import make
 from dpc_mjx.envs import registry
@@ -30,12 +30,6 @@ _EXACT = 1e-12  # m: positions computed the same way from the same numbers
 # off the trunk's centre line (the scene moves in x and z only), and the IK's soft approach axis
 # lets carrying's waypoints settle up to ~0.01 rad apart for it; b1's agree to 1e-6.
 _SAME_IK_TOL = 0.02
-
-
-def _saved(model: mujoco.MjModel) -> bytes:
-    buffer = np.zeros(mujoco.mj_sizeModel(model), np.uint8)
-    mujoco.mj_saveModel(model, None, buffer)
-    return buffer.tobytes()
 
 
 def _a1_reference(task: str, arm: str) -> mujoco.MjSpec:
@@ -63,7 +57,7 @@ def test_the_a1s_scenes_are_the_module_constants_exactly(task, arm):
     assert scripts.mount_offset(resolve(arm)) == (0.0, 0.0)
     reference = _a1_reference(task, arm)
     assert registry.scene_spec(task, arm).to_xml() == reference.to_xml()
-    assert _saved(registry.build_scene(task, arm)) == _saved(reference.compile())
+    assert model_bytes(registry.build_scene(task, arm)) == model_bytes(reference.compile())
 
 
 def test_the_a1_stands_at_the_stand_height_exactly():
