@@ -72,6 +72,8 @@ bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_env.py
 	$(BIN)/python experiments/bench_engines.py
 	$(BIN)/python experiments/bench_deploy.py
+	$(BIN)/python experiments/bench_limit.py
+	$(BIN)/python experiments/bench_callback.py
 
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf

@@ -231,11 +231,13 @@ def _degenerate_cases() -> dict[str, tuple[np.ndarray, ...]]:
     return cases
 
 
-def test_degenerate_inputs_give_finite_flagged_output():
+def test_degenerate_inputs_give_finite_flagged_output(random_problems):
     cases = _degenerate_cases()
     stacked = [np.stack([c[i] for c in cases.values()]).astype(np.float32) for i in range(4)]
+    # filled up with random problems to _solve_batch's compiled batch (one compile fewer)
+    stacked = [np.concatenate([a, b[len(cases) :]]) for a, b in zip(stacked, random_problems)]
     with np.errstate(all="ignore"):
-        res = _solve_batch(*(jp.asarray(a) for a in stacked))
+        res = _solve_batch(*(jp.asarray(a, jp.float32) for a in stacked))
     res = jax.tree.map(np.asarray, res)
     for field in dataclasses.fields(res):
         assert np.all(np.isfinite(getattr(res, field.name))), field.name
@@ -313,18 +315,18 @@ def _assert_same_results(a: qp.QPResult, b: qp.QPResult, tol: float, P=None) -> 
 
 
 def test_vmap_matches_single_calls(random_problems):
-    """The batched kernel (two chunks, the second padded) against unbatched calls, per problem;
-    the unbatched calls as accurate as the batch (test_random_qps_match_osqp)."""
+    """The batched kernel against unbatched calls, per problem, on the batch's last two chunks
+    (the last one padded: N_PROBLEMS is not a multiple of the chunk); the unbatched calls as
+    accurate as the batch (test_random_qps_match_osqp)."""
     P, q, G, h, x_star = random_problems
-    k = qp._CHUNK + 3
-    args = [jp.asarray(a[:k], jp.float32) for a in (P, q, G, h)]
-    batched = jax.jit(jax.vmap(qp.solve))(*args)
+    assert N_PROBLEMS % qp._CHUNK
+    idx = np.arange(N_PROBLEMS - N_PROBLEMS % qp._CHUNK - 3, N_PROBLEMS)
+    args = [jp.asarray(a, jp.float32) for a in (P, q, G, h)]
+    batched = jax.tree.map(lambda a: np.asarray(a)[idx], _solve_batch(*args))
     single = jax.jit(qp.solve)
-    singles = jax.tree.map(
-        lambda *r: jp.stack(r), *(single(*(a[i] for a in args)) for i in range(k))
-    )
-    check_against_reference(singles, (P[:k], q[:k], G[:k], h[:k]), x_star[:k])
-    _assert_same_results(batched, singles, _LAYOUT_TOL, P=P[:k])
+    singles = jax.tree.map(lambda *r: jp.stack(r), *(single(*(a[i] for a in args)) for i in idx))
+    check_against_reference(singles, (P[idx], q[idx], G[idx], h[idx]), x_star[idx])
+    _assert_same_results(batched, singles, _LAYOUT_TOL, P=P[idx])
 
 
 def test_nested_vmap_and_shared_arguments(random_problems):
@@ -381,13 +383,17 @@ def random_pattern(seed: int) -> np.ndarray:
     return pattern
 
 
+SPARSE_PATTERN = random_pattern(seed=3)
+# the compiled batch solver of the sparse tests (one compile for both)
+_solve_sparse_batch = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=SPARSE_PATTERN)))
+
+
 @pytest.fixture(scope="module")
 def sparse_problems():
-    """Random QPs with G in a random pattern; the reference is the optimum they were built around
+    """Random QPs with G in SPARSE_PATTERN; the reference is the optimum they were built around
     (OSQP at eps 1e-9 hits its iteration limit on some of these)."""
-    pattern = random_pattern(seed=3)
-    P, q, G, h, x_opt = random_qps(N_PROBLEMS, seed=4, g_pattern=pattern)
-    return pattern, (P, q, G, h), x_opt
+    P, q, G, h, x_opt = random_qps(N_PROBLEMS, seed=4, g_pattern=SPARSE_PATTERN)
+    return SPARSE_PATTERN, (P, q, G, h), x_opt
 
 
 def test_sparse_pattern_matches_osqp(sparse_problems):
@@ -397,7 +403,7 @@ def test_sparse_pattern_matches_osqp(sparse_problems):
     1e-2 of its scale along directions where the objective is flat; both meet the tolerances.)"""
     pattern, problems, x_opt = sparse_problems
     args = [jp.asarray(a, jp.float32) for a in problems]
-    res = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=pattern)))(*args)
+    res = _solve_sparse_batch(*args)
     check_against_reference(res, problems, x_opt)
     k = qp._CHUNK_SPARSE + 3
     single = jax.jit(lambda *a: qp.solve(*a, g_pattern=pattern))
@@ -408,10 +414,9 @@ def test_sparse_pattern_matches_osqp(sparse_problems):
 
 def test_entries_outside_the_pattern_are_never_read(sparse_problems):
     pattern, problems, _ = sparse_problems
-    P, q, G, h = (jp.asarray(a[:8], jp.float32) for a in problems)
-    solve = jax.jit(jax.vmap(lambda *a: qp.solve(*a, g_pattern=pattern)))
-    clean = solve(P, q, G, h)
-    noisy = solve(P, q, jp.where(pattern, G, jp.nan), h)
+    P, q, G, h = (jp.asarray(a, jp.float32) for a in problems)
+    clean = _solve_sparse_batch(P, q, G, h)
+    noisy = _solve_sparse_batch(P, q, jp.where(pattern, G, jp.nan), h)
     assert bool(jp.all(noisy.valid))
     _assert_same_results(noisy, clean, 0.0)
 
