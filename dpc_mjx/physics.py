@@ -110,8 +110,9 @@ class NativePhysics:
         self._shapes = {k: getattr(template, k).shape for k in set(INPUTS) | set(OUTPUTS)}
         self._dtypes = {k: getattr(template, k).dtype for k in set(INPUTS) | set(OUTPUTS)}
         self._dtype = template.qpos.dtype  # of the packed arrays (float32 unless x64)
-        self._in_size = sum(math.prod(self._shapes[k]) for k in INPUTS)
-        self._out_size = sum(math.prod(self._shapes[k]) for k in OUTPUTS)
+        # where each field lies in the packed arrays (`_call`): field -> slice of the last axis
+        self._in_slices, self._in_size = _packing(self._shapes, INPUTS)
+        self._out_slices, self._out_size = _packing(self._shapes, OUTPUTS)
 
     def forward(self, d: mjx.Data) -> mjx.Data:
         return self._call(d, advance=False)
@@ -134,12 +135,12 @@ class NativePhysics:
             packed_in,
             vmap_method="broadcast_all",
         )
-        out, offset = {}, 0
-        for k in OUTPUTS:
-            size = math.prod(self._shapes[k])
-            field = packed_out[..., offset : offset + size].reshape(self._shapes[k])
-            out[k], offset = field.astype(self._dtypes[k]), offset + size
-        return d.replace(**out)
+        return d.replace(
+            **{
+                k: packed_out[..., sl].reshape(self._shapes[k]).astype(self._dtypes[k])
+                for k, sl in self._out_slices.items()
+            }
+        )
 
     def _batch(self, n: int, advance: bool) -> tuple[Batch, dict[str, np.ndarray]]:
         """The Batch of `n` simulations for steps (`advance`) or forwards and its bound `INPUTS`
@@ -162,25 +163,28 @@ class NativePhysics:
         rows = packed.reshape(n, self._in_size)
         with self._lock:
             batch, fields = self._batch(n, advance)
-            offset = 0
-            for k in INPUTS:  # float32 (bool as 0/1) -> the state rows' float64, in place
-                size = math.prod(self._shapes[k])
-                fields[k][...] = rows[:, offset : offset + size].reshape(fields[k].shape)
-                offset += size
+            for k, sl in self._in_slices.items():  # float32 (bool as 0/1) -> float64, in place
+                fields[k][...] = rows[:, sl].reshape(fields[k].shape)
             batch.warning[:, _BAD_STATE, 1] = 0  # the counts (warning: (n, mjNWARNING, 2))
             failed = _run(batch, advance)
             # a step that MuJoCo found unstable reset the sim's data to qpos0, and a sim in which
             # it raised kept its state: report either as NaN (a forward resets nothing)
             bad = np.any(batch.warning[:, _BAD_STATE, 1] > 0, axis=1) & advance
             bad[failed] = True
-            offset = 0
-            for k in OUTPUTS:  # float64 -> the env's dtype, rounded as astype rounds
-                size = math.prod(self._shapes[k])
-                out[:, offset : offset + size] = fields[k].reshape(n, size)
-                if k in ("qpos", "qvel") and bad.any():
-                    out[bad, offset : offset + size] = np.nan
-                offset += size
+            for k, sl in self._out_slices.items():  # float64 -> the env's dtype, as astype
+                out[:, sl] = fields[k].reshape(n, sl.stop - sl.start)
+            for k in ("qpos", "qvel"):
+                out[bad, self._out_slices[k]] = np.nan
         return out.reshape(shape + (self._out_size,))
+
+
+def _packing(shapes: dict[str, tuple], keys: tuple[str, ...]) -> tuple[dict[str, slice], int]:
+    """The fields `keys` end to end in one flat array: ({field: its slice}, the array's size)."""
+    slices, offset = {}, 0
+    for k in keys:
+        size = math.prod(shapes[k])
+        slices[k], offset = slice(offset, offset + size), offset + size
+    return slices, offset
 
 
 def _run(batch: Batch, advance: bool) -> np.ndarray:
