@@ -58,7 +58,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--threads", nargs="+", default=["1", "all"], help="1, N or all (every core)")
     p.add_argument("--engines", nargs="+", default=["native", "mjx"], choices=["native", "mjx"])
     p.add_argument("--calls", type=int, default=5, help="timed env calls of 10 steps per row")
-    p.add_argument("--steps", type=int, default=50, help="physics-only calls per repeat")
+    p.add_argument("--steps", type=int, default=200, help="physics-only calls per repeat")
     p.add_argument("--reps", type=int, default=10, help="physics-only repeats")
     p.add_argument("--one-core", action="store_true", help="XLA single-threaded, one core")
     p.add_argument("--quick", action="store_true", help="batch 8, few repeats: a smoke run")
