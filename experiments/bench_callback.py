@@ -20,6 +20,7 @@ import math
 import jax
 import jax.numpy as jp
 import numpy as np
+from mujoco import mjx
 
 import dpc_mjx
 from dpc_mjx.physics import INPUTS, OUTPUTS
@@ -28,8 +29,8 @@ from dpc_mjx.timing import Stopwatch, timed
 
 def field_shapes() -> tuple[list[tuple], list[tuple]]:
     """Per env shapes of `INPUTS` and `OUTPUTS` in the reaching env (`regular`)."""
-    physics = dpc_mjx.make("reaching", arm="regular", engine="native").physics
-    return [physics._shapes[k] for k in INPUTS], [physics._shapes[k] for k in OUTPUTS]
+    d = mjx.make_data(dpc_mjx.make("reaching", arm="regular", engine="native").mx)
+    return [getattr(d, k).shape for k in INPUTS], [getattr(d, k).shape for k in OUTPUTS]
 
 
 def per_field(ins, outs, batch):
