@@ -173,8 +173,9 @@ class NativePhysics:
             bad[failed] = True
             for k, sl in self._out_slices.items():  # float64 -> the env's dtype, as astype
                 out[:, sl] = fields[k].reshape(n, sl.stop - sl.start)
-            for k in ("qpos", "qvel"):
-                out[bad, self._out_slices[k]] = np.nan
+            if bad.any():
+                for k in ("qpos", "qvel"):
+                    out[bad, self._out_slices[k]] = np.nan
         return out.reshape(shape + (self._out_size,))
 
 

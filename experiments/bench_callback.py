@@ -24,7 +24,7 @@ from mujoco import mjx
 
 import dpc_mjx
 from dpc_mjx.physics import INPUTS, OUTPUTS
-from dpc_mjx.timing import Stopwatch, timed
+from dpc_mjx.timing import run_calls, timed
 
 
 def field_shapes() -> tuple[list[tuple], list[tuple]]:
@@ -69,11 +69,7 @@ def time_per_call(make_tick, ins, outs, batch: int, calls: int) -> tuple[float, 
     body = jax.vmap(tick)
     run = jax.jit(lambda xs: jax.lax.scan(lambda c, _: (body(c), None), xs, None, calls)[0])
     _, first = timed(run, xs)
-    best = math.inf
-    for _ in range(5):
-        with Stopwatch() as sw:
-            jax.block_until_ready(run(xs))
-        best = min(best, sw.seconds)
+    best = min(run_calls(lambda _: run(xs), None, 1)[0] for _ in range(5))
     return first, best / calls
 
 

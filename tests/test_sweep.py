@@ -114,8 +114,9 @@ def test_the_table_pairs_every_controller_with_mbc_episode_by_episode(tmp_path):
     )
     paths = result.write(tmp_path)
     rows = _rows(paths["table"])
+    # row-major: upper-arm length, then gripper mass
     assert [(_point(r), r["controller"]) for r in rows] == [
-        (p, c) for c in ("mbc", "dpc") for p in ((0.14, 0.1), (0.14, 0.5), (0.28, 0.1), (0.28, 0.5))
+        (p, c) for c in ("mbc", "dpc") for p in sorted(POINTS)
     ]
     for g, row in enumerate(rows[4:]):
         mean, lo, hi = paired_diff_ci(dpc[g], mbc[g])
