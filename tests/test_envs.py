@@ -268,10 +268,27 @@ def test_invalid_task_arm_and_options_fail_before_compiling(monkeypatch):
             dpc_mjx.make(_TASK, max_force=(10.0, 10.0))
         with pytest.raises(DpcError, match="max_torque must be > 0"):
             dpc_mjx.make(_TASK, max_torque=(1.0, -1.0, 1.0))
+        with pytest.raises(DpcError, match=r"observer_gain must be a finite number in \[1.0"):
+            dpc_mjx.make(_TASK, observer_gain=0.0)
+        with pytest.raises(DpcError, match=r"observer_gain must be a number or a \(force, torque"):
+            dpc_mjx.make(_TASK, observer_gain=(10.0, 20.0, 30.0))
+        with pytest.raises(DpcError, match="observer_aligned must be True or False"):
+            dpc_mjx.make(_TASK, observer_aligned="yes")
     assert compiles == []
     monkeypatch.undo()
     with pytest.raises(DpcError, match="multiple of the physics step"):
         dpc_mjx.make(_TASK, arm="none", policy_dt=0.005)
+
+
+def test_the_observer_options_reach_the_controller():
+    """`observer_gain` and `observer_aligned` set the controller's observer: its gains and the
+    delay it aligns to (the env's sensor_delay, or none)."""
+    env = dpc_mjx.make(_TASK, arm="none", sensor_delay=2, observer_aligned=True, observer_gain=30)
+    ob = env.controller.config.observer
+    assert (ob.delay, ob.k_force, ob.k_torque) == (2, 30, 30)
+    ob = dpc_mjx.make(_TASK, arm="none", observer_gain=(10, 40)).controller.config.observer
+    assert (ob.k_force, ob.k_torque) == (10, 40)
+    assert dpc_mjx.make(_TASK, arm="none", sensor_delay=2).controller.config.observer.delay == 0
 
 
 def test_yaw_frame_wrench_turns_with_the_heading():

@@ -57,10 +57,12 @@ _MODEL = balance.default_params(mass=12.0, inertia=(0.05, 0.2, 0.22))
 
 
 @jax.jit
-def _estimates(com_vel, rot, ang_vel):
-    """(T, 6) estimates over T ticks of (T, 3) com_vel, (T, 3, 3) rot, (T, 3) ang_vel, no ground
-    force (a body in free flight), default gains."""
+def _estimates(com_vel, rot, ang_vel, forces=None, config=observer.ObserverConfig()):
+    """(T, 6) estimates over T ticks of (T, 3) com_vel, (T, 3, 3) rot, (T, 3) ang_vel, the feet
+    at the COM; `forces` (T, 4, 3) N the ground forces the observer is told were commanded at the
+    previous tick (None: none, a body in free flight); default gains."""
     zeros = jp.zeros((4, 3))
+    forces = jp.zeros((com_vel.shape[0], 4, 3)) if forces is None else forces
 
     def body(i):
         return BodyState(
@@ -68,10 +70,11 @@ def _estimates(com_vel, rot, ang_vel):
         )
 
     def tick(ob, i):
-        ob = observer.update(observer.ObserverConfig(), _MODEL, ob, body(i), zeros, _DT, 0.02)
+        ob = observer.update(config, _MODEL, ob, body(i), forces[i], _DT, 0.0)
         return ob, ob.estimate
 
-    return jax.lax.scan(tick, observer.init(_MODEL, body(0)), jp.arange(com_vel.shape[0]))[1]
+    ob0 = observer.init(config, _MODEL, body(0))
+    return jax.lax.scan(tick, ob0, jp.arange(com_vel.shape[0]))[1]
 
 
 def test_a_constant_wrench_is_estimated_with_a_first_order_lag():
@@ -88,6 +91,33 @@ def test_a_constant_wrench_is_estimated_with_a_first_order_lag():
     np.testing.assert_allclose(r, expected, rtol=_LAG_RTOL, atol=_LAG_RTOL * np.abs(ext).max())
     one_lag = round(1.0 / (k[0] * _DT))  # ticks in one time constant 1/K: 1 - 1/e of the step
     assert np.all(np.abs(r[one_lag] / ext - (1 - np.exp(-1))) < 0.03), r[one_lag] / ext
+
+
+def test_an_aligned_observer_integrates_the_forces_that_acted():
+    """Ground forces commanded at tick j act over [t_{j+D}, t_{j+D+1}] (D = 2 ticks of delay):
+    the observer aligned to D (`delay=D`) estimates a constant external wrench with the same
+    first-order lag as with no delay; the one that integrates the previous tick's forces is off
+    by the forces' change over D ticks, filtered."""
+    n, delay = 150, 2
+    mass = float(_MODEL.mass)
+    ext = np.array([5.0, -3.0, 20.0, 0.0, 0.0, 0.0])  # N; no torque (the feet at the COM)
+    t = np.arange(n) * _DT
+    f_z = mass * balance.GRAVITY / 4 * (1.0 + 0.3 * np.sin(2 * np.pi * t / 0.3))  # N per foot
+    commanded = np.zeros((n, 4, 3))
+    commanded[:, :, 2] = f_z[:, None]  # commanded at tick j
+    acting = np.concatenate([np.zeros((delay, 4, 3)), commanded[:-delay]])  # over [t_j, t_j+1]
+    weight = np.array([0.0, 0.0, -balance.GRAVITY * mass])
+    dv = (acting.sum(axis=1) + weight + ext[:3]) / mass * _DT  # (n, 3) m/s per tick
+    com_vel = np.concatenate([np.zeros((1, 3)), np.cumsum(dv, axis=0)[:-1]])  # v at t_k
+    told = np.concatenate([np.zeros((1, 4, 3)), commanded[:-1]])  # tick k: commanded at k - 1
+    rot, ang_vel = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
+    aligned = observer.ObserverConfig(delay=delay)
+    r = np.asarray(_estimates(com_vel, rot, ang_vel, told, aligned))
+    k = np.asarray(aligned.gains())
+    expected = ext * (1.0 - (1.0 - k * _DT) ** np.arange(n)[:, None])
+    np.testing.assert_allclose(r, expected, rtol=_LAG_RTOL, atol=_LAG_RTOL * np.abs(ext).max())
+    unaligned = np.asarray(_estimates(com_vel, rot, ang_vel, told))
+    assert np.abs(unaligned - expected)[n // 2 :, 2].max() > 1.0  # N: what alignment removes
 
 
 def test_torque_free_tumbling_needs_no_gyroscopic_term():
@@ -124,6 +154,9 @@ def test_gains_must_be_below_the_tick_rate():
     for bad in (dict(k_force=0.0), dict(k_torque=300.0), dict(k_force=(1.0, 2.0))):
         with pytest.raises(DpcError, match="rad/s"):
             observer.ObserverConfig(**bad).validate(_DT)
+    for delay in (-1, 11, 1.0):
+        with pytest.raises(DpcError, match="sensor_delay"):
+            observer.ObserverConfig(delay=delay).validate(_DT)
 
 
 # -- the bench: bare A1 standing, u = the estimate ----------------------------------------------

@@ -198,6 +198,10 @@ def test_result_shapes_and_unbatched_call(random_problems):
     assert res.iterations.dtype == jp.int32 and res.valid.dtype == jp.bool_
     assert bool(res.valid) and bool(res.converged)
     assert 0 <= int(res.iterations) <= qp.QPSettings().iterations
+    # the cold warm start (`QPResult.zeros`, the controller's first tick) is a result's pytree
+    cold = qp.QPResult.zeros(n, m)
+    same = jax.tree.map(lambda a, b: (a.shape, a.dtype) == (b.shape, b.dtype), cold, res)
+    assert all(jax.tree.leaves(same)) and not bool(cold.valid)
 
 
 def _degenerate_cases() -> dict[str, tuple[np.ndarray, ...]]:

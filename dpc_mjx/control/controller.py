@@ -89,23 +89,15 @@ class LowLevelController:
 
     def init(self, d) -> ControllerState:
         s = read_state(self.idx, d)
-        # the warm start: zeros shaped like a solve's result (eval_shape: no solve in the reset)
-        warm = jax.eval_shape(
-            qp.solve,
-            jp.eye(balance.N_VARS),
-            jp.zeros(balance.N_VARS),
-            jp.zeros((balance.N_ROWS, balance.N_VARS)),
-            jp.ones(balance.N_ROWS),
-        )
         return ControllerState(
             t=jp.zeros(()),
             pos_des=s.com_pos.at[2].set(self.config.body_height),
             yaw_des=yaw_of(s.rot),
             swing_start=s.foot_pos,
             stance=jp.ones(4, bool),
-            qp=jax.tree.map(lambda a: jp.zeros(a.shape, a.dtype), warm),
+            qp=qp.QPResult.zeros(balance.N_VARS, balance.N_ROWS),  # the first tick starts cold
             forces=jp.zeros((4, 3)),
-            observer=observer_lib.init(self.config.balance, s),
+            observer=observer_lib.init(self.config.observer, self.config.balance, s),
         )
 
     def _observe(self, cs: ControllerState, s: BodyState) -> observer_lib.ObserverState:
@@ -220,16 +212,22 @@ class LowLevelController:
 
 
 def make_controller(
-    model: mujoco.MjModel, config: ControllerConfig | None = None, gait_: gait.Gait | None = None
+    model: mujoco.MjModel,
+    config: ControllerConfig | None = None,
+    gait_: gait.Gait | None = None,
+    observer: observer_lib.ObserverConfig | None = None,
 ) -> LowLevelController:
     """A controller for a compiled variant. The balance model is the bare base (see module doc);
-    the default config is the A1's scaled to the base (`control.base_scaling`)."""
+    the default config is the A1's scaled to the base (`control.base_scaling`); `observer`, if
+    given, replaces the config's observer (gains, delay)."""
     lay = layout(model)
     idx = state_index(model, lay)
     scale = base_scale(idx)
     if config is None:
         a1_config = ControllerConfig(balance=balance.default_params(), gait=gait_ or gait.trot())
         config = scaled_config(a1_config, scale, lay, idx)
+    if observer is not None:
+        config = config.replace(observer=observer)
     config.observer.validate(float(model.opt.timestep))
     arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)
     return LowLevelController(

@@ -47,6 +47,14 @@ trotting at 0.3 m/s the estimate's ripple (std of f_z) measured 4.6, 11, 21, 34 
 the discrete filter is close to its continuous lag) a twentieth of a reaching move and a quarter
 of the shortest push, at a ripple the balance QP tolerates when it feeds r back as u.
 
+Delay (`ObserverConfig.delay`, ticks). With a measurement-to-torque delay of D ticks
+(`EnvConfig.sensor_delay`) the forces commanded at tick j act over [t_{j+D}, t_{j+D+1}], so the
+wrench that moved the momentum between ticks k-1 and k is that of the forces commanded at tick
+k-1-D. An observer aligned to the delay (`delay=D`, `EnvConfig.observer_aligned`) keeps the D
+forces commanded but not yet acting (`ObserverState.pending`) and integrates the one that acted;
+`delay=0` integrates the forces of the previous tick whatever the env's delay (the observer
+before this option: the delay is then one of the errors it sees).
+
 Where it fails. It estimates ALL of the wrench on the base (trunk + legs) that the nominal model
 does not explain, not the arm's alone, and cannot separate them: the arm's wrench, plus the model
 error of the legs (their weight, which tau = J^T f does not carry: the feet push harder than asked;
@@ -80,6 +88,9 @@ class ObserverConfig:
 
     k_force: float | tuple[float, float, float] = 20.0  # rad/s, on [m v_com]
     k_torque: float | tuple[float, float, float] = 20.0  # rad/s, on [I_w omega]
+    # ticks from a force's command to its action (see the module docstring; static: it sizes
+    # `ObserverState.pending`)
+    delay: int = struct.field(pytree_node=False, default=0)
 
     def gains(self) -> jax.Array:
         """(6,) rad/s, K's diagonal [force x, y, z, torque x, y, z]."""
@@ -88,7 +99,13 @@ class ObserverConfig:
         return jp.concatenate([k_f, k_t])
 
     def validate(self, dt: float) -> None:
-        """Raise `DpcError` unless every gain is in (0, 1/dt) rad/s (a stable, monotone lag)."""
+        """Raise `DpcError` unless every gain is in (0, 1/dt) rad/s (a stable, monotone lag) and
+        the delay a whole number of ticks in [0, 10]."""
+        if not (isinstance(self.delay, int) and 0 <= self.delay <= 10):
+            raise DpcError(
+                f"ObserverConfig.delay={self.delay!r}: use a whole number of {dt:g} s ticks in "
+                "[0, 10], the env's sensor_delay to align the observer to it."
+            )
         for name in ("k_force", "k_torque"):
             value = getattr(self, name)
             values = value if isinstance(value, tuple) else (value,)
@@ -110,6 +127,7 @@ class ObserverState:
     predicted: jax.Array  # (6,) p_0 + sum_{j<k} (F_known_j + r_j) dt: [kg·m/s (3), kg·m²/s (3)]
     estimate: jax.Array  # (6,) r_k = [f (N), tau (N·m)], the estimated external wrench
     elapsed: jax.Array  # () s since the last update (0 at init: the first tick reads init's data)
+    pending: jax.Array  # (delay, 4, 3) N, world: forces commanded but not yet acting, oldest first
 
 
 def momentum(model: BalanceParams, s: BodyState) -> jax.Array:
@@ -131,9 +149,15 @@ def known_wrench(
     return jp.concatenate([force, torque])
 
 
-def init(model: BalanceParams, s: BodyState) -> ObserverState:
-    """The observer at rest on the state `s`: r = 0, predicted = the measured momentum."""
-    return ObserverState(predicted=momentum(model, s), estimate=jp.zeros(6), elapsed=jp.zeros(()))
+def init(config: ObserverConfig, model: BalanceParams, s: BodyState) -> ObserverState:
+    """The observer at rest on the state `s`: r = 0, predicted = the measured momentum, no force
+    pending (the home controls of a reset command no leg torque)."""
+    return ObserverState(
+        predicted=momentum(model, s),
+        estimate=jp.zeros(6),
+        elapsed=jp.zeros(()),
+        pending=jp.zeros((config.delay, 4, 3)),
+    )
 
 
 def update(
@@ -147,12 +171,19 @@ def update(
 ) -> ObserverState:
     """One tick: `s` the body state read now, `forces` (4, 3) the ground forces commanded at
     the previous tick (N, world), `dt` (s) the tick, `foot_radius` (m) the base's feet's.
-    r_k = K (p_k - predicted_k), see module doc."""
-    wrench = known_wrench(model, s, forces, foot_radius)
+    r_k = K (p_k - predicted_k), see module doc; with `config.delay` D the known wrench is that
+    of the forces commanded D ticks before `forces`."""
+    acting, pending = forces, ob.pending
+    if config.delay:  # the oldest pending forces acted over the tick just past
+        acting, pending = ob.pending[0], jp.concatenate([ob.pending[1:], forces[None]])
+    wrench = known_wrench(model, s, acting, foot_radius)
     predicted = ob.predicted + (wrench + ob.estimate) * ob.elapsed
     estimate = config.gains() * (momentum(model, s) - predicted)
     return ObserverState(
-        predicted=predicted, estimate=estimate, elapsed=jp.full((), dt, jp.float32)
+        predicted=predicted,
+        estimate=estimate,
+        elapsed=jp.full((), dt, jp.float32),
+        pending=pending,
     )
 
 

@@ -60,6 +60,7 @@ from mujoco import mjx
 from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
 from dpc_mjx.control.controller import make_controller, oracle_u
+from dpc_mjx.control.observer import ObserverConfig
 from dpc_mjx.control.state import has_fallen
 from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
@@ -96,7 +97,13 @@ class DpcEnv(Env):
         self.lay = layout(self.model)
         self.mx = sim.put_model(self.model)
         self.physics = make_physics(config.engine, self.model, self.mx)
-        self.controller = make_controller(self.model, gait_=_GAITS[config.gait]())
+        gain = config.observer_gain  # rad/s, one or (force, torque)
+        k_force, k_torque = gain if isinstance(gain, tuple) else (gain, gain)
+        delay = config.sensor_delay if config.observer_aligned else 0  # ticks
+        observer = ObserverConfig(k_force=k_force, k_torque=k_torque, delay=delay)
+        self.controller = make_controller(
+            self.model, gait_=_GAITS[config.gait](), observer=observer
+        )
         self.props = prop_layout(self.model)
         self.sampler = make_sampler(config, self.model, self.lay, len(self.props.objects))
         self.obs_layout = observations.ObsLayout.of(self.lay)

@@ -115,6 +115,15 @@ class EnvConfig:
     sensor_noise: float = 1.0
     sensor_delay: int = 1
 
+    # The disturbance observer (`control/observer.py`; the 'observer' controller's u and the
+    # policy's u_obs): its gain K (rad/s, the estimate's bandwidth: a lag of 1/K, the
+    # measurement noise passed in proportion to K), one for every axis or (force, torque), and
+    # whether it is aligned to the sensor_delay above (True: the known wrench uses the forces
+    # that acted over the tick just past, commanded 1 + sensor_delay ticks before; False: those
+    # of the previous tick).
+    observer_gain: float | tuple[float, float] = 20.0
+    observer_aligned: bool = False
+
     # Initial state: home pose, leg joints offset ~ U(-joint_noise, joint_noise) rad.
     joint_noise: float = 0.05
 
@@ -218,6 +227,8 @@ class EnvConfig:
             )
         _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
         _int("sensor_delay", self.sensor_delay, 0, 10)
+        _gains("observer_gain", self.observer_gain, 1.0, 200.0)
+        _bool("observer_aligned", self.observer_aligned)
         for name in ("max_force", "max_torque"):
             _axes(name, getattr(self, name))
         for name in ("policy_dt", "explode_speed", "reach_move_time"):
@@ -277,6 +288,19 @@ def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
 def _int(name: str, value: Any, low: int, high: float = math.inf) -> None:
     if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
         raise DpcError(f"{name} must be an int in [{low}, {high}], got {value!r}.")
+
+
+def _gains(name: str, value: Any, low: float, high: float) -> None:
+    """A number in [low, high], or a (force, torque) pair of them."""
+    if isinstance(value, tuple) and len(value) != 2:
+        raise DpcError(f"{name} must be a number or a (force, torque) pair, got {value!r}.")
+    for v in value if isinstance(value, tuple) else (value,):
+        _number(name, v, low, high)
+
+
+def _bool(name: str, value: Any) -> None:
+    if not isinstance(value, bool):
+        raise DpcError(f"{name} must be True or False, got {value!r}.")
 
 
 def _number(name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 
 import jax
+import jax.numpy as jp
 from flax import struct
 
 
@@ -72,3 +73,22 @@ class QPResult:
     iterations: jax.Array
     converged: jax.Array
     valid: jax.Array
+
+    @classmethod
+    def zeros(cls, n: int, m: int, dtype=jp.float32) -> QPResult:
+        """A not-valid result of zeros for n variables and m rows, shaped and typed as `solve`'s
+        for float `dtype` inputs: a warm start that starts cold (built without tracing a
+        solve)."""
+        scalar = jp.zeros((), dtype)
+        return cls(
+            x=jp.zeros(n, dtype),
+            z=jp.zeros(m, dtype),
+            s=jp.zeros(m, dtype),
+            objective=scalar,
+            primal_residual=scalar,
+            dual_residual=scalar,
+            gap=scalar,
+            iterations=jp.zeros((), jp.int32),
+            converged=jp.zeros((), bool),
+            valid=jp.zeros((), bool),
+        )
