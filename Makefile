@@ -74,6 +74,7 @@ bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_deploy.py
 	$(BIN)/python experiments/bench_limit.py
 	$(BIN)/python experiments/bench_callback.py
+	$(BIN)/python experiments/bench_compile.py
 
 mjcf: $(STAMP)
 	$(BIN)/dpc-mjx mjcf mjcf
