@@ -40,7 +40,7 @@ def per_field(ins, outs, batch):
 
     def tick(xs):
         out = jax.pure_callback(lambda *_: results, specs, *xs, vmap_method="broadcast_all")
-        return [x + out[0] for x in xs]  # time's output feeds every input: nothing is hoisted
+        return [x + out[0] for x in xs]  # its output feeds every input: nothing is hoisted
 
     return tick, [jp.zeros(s) for s in ins]
 
