@@ -355,22 +355,24 @@ def test_nested_vmap_and_shared_arguments(random_problems):
 
 def test_warm_started_scan_under_vmap(random_problems):
     """The controller's pattern, jit(vmap(scan(solve warm-started from the previous result))),
-    against the same steps as single calls."""
+    from the controller's first tick (`QPResult.zeros`: no valid warm start, a cold start inside
+    the warm-started kernel), against the same steps as single calls."""
     P, q, G, h, _ = random_problems
     args = [jp.asarray(a[:4], jp.float32) for a in (P, q, G, h)]
-    scales = jp.array([1.0, 1.01, 0.99])  # q changes by 1 % per step
+    scales = jp.array([1.0, 1.01, 0.99, 1.0])  # q changes by 1 % per step after the first
+    cold = qp.QPResult.zeros(N_VARS, N_ROWS)
 
     def run(P, q, G, h):
         def step(prev, scale):
             res = qp.solve(P, q * scale, G, h, warm_start=prev)
             return res, res
 
-        return jax.lax.scan(step, qp.solve(P, q, G, h), scales)[1]
+        return jax.lax.scan(step, cold, scales)[1]
 
-    batched = jax.jit(jax.vmap(run))(*args)  # fields (4, 3, ...)
+    batched = jax.jit(jax.vmap(run))(*args)  # fields (4, 4, ...)
     single = jax.jit(lambda P, q, G, h, w: qp.solve(P, q, G, h, warm_start=w))
     for i in range(4):
-        prev = jax.jit(qp.solve)(*(a[i] for a in args))
+        prev = cold
         for t, scale in enumerate(np.asarray(scales)):
             prev = single(args[0][i], args[1][i] * scale, args[2][i], args[3][i], prev)
             step = jax.tree.map(lambda a, i=i, t=t: a[i, t], batched)
