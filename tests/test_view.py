@@ -2,6 +2,7 @@
 viewer that pushes a body and presses a key, on a tiny fake env (no env compile); the display
 check; the key map. The real env under the loop's step is the slow test at the end."""
 
+import contextlib
 import types
 
 import jax
@@ -14,8 +15,10 @@ from flax import struct
 
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots import build
 from dpc_mjx.run import view
 from dpc_mjx.run.cli import main
+from dpc_mjx.run.render import gl_context
 
 NBODY = 3  # world, trunk, arm link of the fake model
 PUSH = np.zeros((NBODY, 6), np.float32)
@@ -285,12 +288,65 @@ def test_a_mouse_push_moves_the_real_env():
     np.testing.assert_allclose(live.state.info["dist"].command, command)
 
 
+def _body_at_the_centre(model, data, cam, size=48) -> int:
+    """The body whose geom the pixel at the centre of `cam`'s picture shows (-1: none), from
+    MuJoCo's segmentation rendering (each geom drawn in a colour that encodes its index in the
+    scene), headless."""
+    ctx = gl_context(size, size)
+    ctx.make_current()
+    try:
+        scene = mujoco.MjvScene(model, maxgeom=2000)
+        con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_100)
+        viewport = mujoco.MjrRect(0, 0, size, size)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, con)
+        opt, perturb = mujoco.MjvOption(), mujoco.MjvPerturb()
+        mujoco.mjv_updateScene(model, data, opt, perturb, cam, mujoco.mjtCatBit.mjCAT_ALL, scene)
+        scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = 1
+        scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = 1
+        rgb = np.zeros((size, size, 3), np.uint8)
+        mujoco.mjr_render(viewport, scene, con)
+        mujoco.mjr_readPixels(rgb, None, viewport, con)
+        con.free()
+    finally:
+        ctx.free()
+    r, g, b = (int(c) for c in rgb[size // 2, size // 2])
+    index = r + 256 * g + 65536 * b - 1  # -1: the background
+    if index < 0 or scene.geoms[index].objtype != mujoco.mjtObj.mjOBJ_GEOM:
+        return -1
+    return int(model.geom_bodyid[scene.geoms[index].objid])
+
+
+@pytest.mark.parametrize("walked", [0.0, 5.0])
+def test_the_camera_follows_the_robot_where_it_walks(walked):
+    """`follow` keeps the robot at the centre of the viewer's picture, also after it walked 5 m
+    (MuJoCo's default free camera looks at the scene's centre: the floor, by then)."""
+    model = build("regular")
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.key_qpos[0]
+    data.qpos[0] += walked  # m along +x
+    mujoco.mj_forward(model, data)
+    trunk = model.body("trunk").id
+    cam = mujoco.MjvCamera()
+    view.follow(cam, trunk)
+    body = _body_at_the_centre(model, data, cam)
+    assert body >= 0 and model.body_rootid[body] == model.body_rootid[trunk], body
+    if walked:  # the check can fail: without `follow` the centre shows no part of the robot
+        free = mujoco.MjvCamera()
+        mujoco.mjv_defaultFreeCamera(model, free)
+        body = _body_at_the_centre(model, data, free)
+        assert body < 0 or model.body_rootid[body] != model.body_rootid[trunk]
+
+
 class FakeWindow:
     """`launch_passive`'s handle, for `view` end to end: a window open for the steps asked,
     the user pressing Up once and pulling nothing."""
 
     def __init__(self, model, data, key_callback):
         self.m, self.d, self.key_callback, self.syncs = model, data, key_callback, 0
+        self.cam = mujoco.MjvCamera()
+
+    def lock(self):
+        return contextlib.nullcontext()
 
     def __enter__(self):
         return self
@@ -324,4 +380,7 @@ def test_view_runs_the_shipped_dpc_live(monkeypatch):
     )
     stats = view.view(controller="dpc", seconds=0.2)
     assert stats.steps == 10 and windows[0].syncs == 10
+    cam = windows[0].cam  # following the trunk
+    assert cam.type == mujoco.mjtCamera.mjCAMERA_TRACKING
+    assert cam.trackbodyid == windows[0].m.body("trunk").id
     assert windows[0].m.nbody > 10  # the A1 with its arm

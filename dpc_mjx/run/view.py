@@ -6,7 +6,9 @@ reaching motion on, one jitted env step per `env.dt` (20 ms) of wall time, the r
 slept (`run_loop`; a line warns when a step takes longer). The viewer
 (`mujoco.viewer.launch_passive`) shows a copy of the env's data: after each step its qpos, qvel
 and time go into an `MjData` of a copy of the model, forwarded for display (`LiveEnv.mirror`);
-the viewer never steps physics itself.
+the viewer never steps physics itself. Its camera follows the trunk (`follow`), so a walking
+robot stays in the picture (MuJoCo's default camera looks at the scene's centre, which a robot
+walks out of).
 
 Cost at batch 1 (CPU time per env step, the shipped DPC, XLA on one thread, measured on the
 project's 2-core box at load average ~11): native 37 ms, most of it the host callback of each
@@ -80,6 +82,9 @@ HELP = (
     "twists it"
 )
 WARN_EVERY_S = 5.0  # s of wall time between two warnings that the loop is behind
+# The camera that follows the trunk (`follow`): m from the trunk, degrees (negative: looking down),
+# degrees of the viewing direction from +x (45: from behind the robot's right side)
+FOLLOW_DISTANCE, FOLLOW_ELEVATION, FOLLOW_AZIMUTH = 2.0, -20.0, 45.0
 
 
 def display_problem(platform: str, environ: Mapping[str, str], mjpython: bool) -> str | None:
@@ -204,6 +209,18 @@ def run_loop(
     return stats
 
 
+def follow(cam: mujoco.MjvCamera, body: int) -> None:
+    """Make the viewer's camera `cam` follow `body` (the trunk), so that a walking robot stays in
+    view: MuJoCo's tracking camera, `FOLLOW_DISTANCE` m away, looking down `FOLLOW_ELEVATION`
+    degrees, from behind the robot (facing +x) and to its right (`FOLLOW_AZIMUTH` degrees from
+    +x); the mouse still turns and zooms it."""
+    cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+    cam.trackbodyid = body
+    cam.distance = FOLLOW_DISTANCE
+    cam.elevation = FOLLOW_ELEVATION
+    cam.azimuth = FOLLOW_AZIMUTH
+
+
 def pushed(env, xfrc: jax.Array):
     """A shallow copy of `env` whose physics ticks also apply `xfrc` (nbody, 6) world
     [f (N), tau (N·m)] at each body's COM, added to what the env and its task set."""
@@ -310,6 +327,8 @@ def view(
         print(f"view: real time, {1e3 * live_env.dt:.0f} ms per step\n{HELP}", flush=True)
         n_steps = None if seconds is None else max(1, round(seconds / live_env.dt))
         with mujoco.viewer.launch_passive(live.model, live.data, key_callback=keys) as viewer:
+            with viewer.lock():
+                follow(viewer.cam, live_env.lay.trunk)
             stats = run_loop(live.step, viewer, keys, live_env.dt, n_steps)
     print(f"view: {stats.steps} steps, {stats.late} behind real time")
     return stats
