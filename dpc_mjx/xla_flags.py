@@ -1,25 +1,32 @@
-"""The one XLA flag this library sets, only on the jaxlib versions measured to need it.
+"""The XLA flags this library sets for the CPU, each only on the jaxlib versions it was measured on.
 
-`--xla_cpu_enable_concurrency_optimized_scheduler=false`: with XLA's default (the
-concurrency-optimised scheduler for CPU programs), a batched MJX env step,
+`--xla_cpu_enable_concurrency_optimized_scheduler=false` (`SCHEDULER`, jaxlib 0.10.2): with XLA's
+default (the concurrency-optimised scheduler for CPU programs), a batched MJX env step,
 `jax.jit(jax.vmap(env.step))` at batch 1024, stopped for good (every thread asleep, no CPU used)
 in 4 of 7 processes on jaxlib 0.10.2 on a 2-core CPU, and in 0 of 7 with the flag. jaxlib 0.9.2
-(the pinned version) ran the same step with and without it, so it gets nothing
-(docs/decisions.md, "Packaging and versions"). The flag only changes how the CPU compiler orders
-instructions, not its arithmetic, and GPU programs not at all.
+ran the same step with and without it. It only changes how the CPU compiler orders
+instructions, not its arithmetic.
+
+`--xla_cpu_use_fusion_emitters=false` (`OLDER_EMITTERS`, jaxlib 0.9.2, the pinned version):
+XLA:CPU's older loop emitters instead of its MLIR fusion emitters. The env step, many small
+fusions (the balance QP, the random draws), compiles about a third faster with the same steps/s
+(docs/benchmarks.md, "Compile time with the older fusion emitters"). The same HLO, so the same
+arithmetic up to rounding (how a loop is vectorised, where FMA contracts): the spread between two
+CPUs, which the recorded evaluations allow. Programs compiled before it (the shipped export's
+training, the published tables until 2026-12-03) ran without it; `XLA_FLAGS=` reproduces them.
+Both flags concern XLA's CPU backend only; GPU programs are compiled as without them.
 
 Rules (`dpc_mjx/__init__.py` calls `apply()` once, first thing; it imports no jax and opens no
 file):
 - XLA_FLAGS set in the environment, to anything (an empty string too), is left byte-identical:
-  the user decides (`XLA_FLAGS=--xla_cpu_enable_concurrency_optimized_scheduler=true` runs XLA's
-  default);
-- otherwise XLA_FLAGS is set to the flag only if the installed jaxlib's version
-  (`importlib.metadata`) is in `NEEDS_FLAG`, the versions measured to hang without it and to
-  know it (XLA aborts the whole process on a flag it does not know, and flags come and go
-  between releases), and the CPU backend can start (JAX_PLATFORMS unset or naming `cpu`);
+  the user decides (`XLA_FLAGS=` runs XLA's defaults);
+- otherwise XLA_FLAGS is set to the installed jaxlib's flags (`importlib.metadata`;
+  `FLAGS_BY_JAXLIB`, the versions they were measured on and known to: XLA aborts the whole
+  process on a flag it does not know, and flags come and go between releases), only where the
+  CPU backend can start (JAX_PLATFORMS unset or naming `cpu`);
 - XLA reads XLA_FLAGS once, when jax starts its first backend (the first array or
   `jax.devices()`), not at `import jax`. `import dpc_mjx` imports no jax, so importing it first
-  is enough; a process that computed with jax before importing dpc_mjx runs without the flag
+  is enough; a process that computed with jax before importing dpc_mjx runs without the flags
   (jax has no public call that says whether its backends started, so this is not detected).
 """
 
@@ -29,11 +36,13 @@ import os
 from collections.abc import Mapping
 from importlib import metadata
 
-FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+OLDER_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 
-# jaxlib versions measured to hang without FLAG and to start with it (docs/decisions.md).
-# Measured without a hang, so not here: 0.9.2. Not measured: every other version.
-NEEDS_FLAG: frozenset[str] = frozenset({"0.10.2"})
+# jaxlib version -> the flags measured on it (docs/decisions.md, "Packaging and versions"): 0.10.2
+# hung without SCHEDULER (OLDER_EMITTERS not measured there); 0.9.2 compiles a third faster with
+# OLDER_EMITTERS and ran without SCHEDULER. Not measured: every other version.
+FLAGS_BY_JAXLIB: dict[str, tuple[str, ...]] = {"0.9.2": (OLDER_EMITTERS,), "0.10.2": (SCHEDULER,)}
 
 
 def jaxlib_version() -> str | None:
@@ -53,15 +62,15 @@ def cpu_backend_allowed(jax_platforms: str | None) -> bool:
 
 def flags_for(environ: Mapping[str, str], jaxlib: str | None) -> str | None:
     """The XLA_FLAGS to set for this environment and jaxlib version, None to set nothing."""
-    if "XLA_FLAGS" in environ or jaxlib not in NEEDS_FLAG:
+    if "XLA_FLAGS" in environ or jaxlib not in FLAGS_BY_JAXLIB:
         return None
     if not cpu_backend_allowed(environ.get("JAX_PLATFORMS")):
         return None
-    return FLAG
+    return " ".join(FLAGS_BY_JAXLIB[jaxlib])
 
 
 def apply() -> None:
-    """Set XLA_FLAGS to `FLAG` where the rules of the module docstring say it is needed."""
+    """Set XLA_FLAGS to the jaxlib's flags where the rules of the module docstring say so."""
     flags = flags_for(os.environ, jaxlib_version())
     if flags is not None:
         os.environ["XLA_FLAGS"] = flags

@@ -60,6 +60,7 @@ def main() -> None:
     p.add_argument("--controllers", type=int, default=4, help="to this many controllers")
     args = p.parse_args()
     _, (arm,), overrides = export_cells(SHIPPED, None, ["mbc"], DEFAULT_TASK)
+    overrides = {**overrides, "engine": "mjx"}  # a batch of models is MJX's; both ways in MJX
     ua, gm = (
         a.ravel()
         for a in np.meshgrid(

@@ -1,25 +1,16 @@
-"""Shared test set-up: XLA:CPU's older fusion emitters, a persistent JAX compilation cache, and
+"""Shared test set-up: the library's XLA flags, a persistent JAX compilation cache, and
 the test files ordered longest first so that `make test`'s two workers (`-n 2 --dist loadfile`: a
 file at a time) finish together instead of one waiting on the other's last long file."""
 
 import os
 import pathlib
-from importlib import metadata
 
-# XLA:CPU's loop-fusion code from its older emitters instead of the MLIR fusion emitters (XLA's
-# default): the env and QP programs, which are many small fusions, compile ~30% faster with the
-# same steps/s (docs/benchmarks.md, "Compile time with the older fusion emitters"). The same
-# HLO, so the same arithmetic up to rounding (how a loop is vectorised, where FMA contracts),
-# the spread the recordings already allow between CPUs. Set before jax starts its CPU backend
-# (this module runs first), only for the jaxlib it was measured on (XLA aborts on a flag it does
-# not know) and only where XLA_FLAGS is unset: a set XLA_FLAGS is left as it is, as
-# `dpc_mjx.xla_flags` leaves it, and subprocesses inherit this one.
-_OLDER_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
-_OLDER_EMITTERS_JAXLIB = ("0.9.2",)
-if "XLA_FLAGS" not in os.environ and metadata.version("jaxlib") in _OLDER_EMITTERS_JAXLIB:
-    os.environ["XLA_FLAGS"] = _OLDER_EMITTERS
+import jax
 
-import jax  # noqa: E402  (after XLA_FLAGS)
+# `import dpc_mjx` before jax's first array (importing jax starts no backend): it sets XLA_FLAGS,
+# where unset, to the pinned jaxlib's flags (`dpc_mjx.xla_flags`: XLA:CPU's older fusion
+# emitters, a third less compile), and the tests' subprocesses inherit them.
+import dpc_mjx  # noqa: F401
 
 _CACHE = pathlib.Path(__file__).resolve().parents[1] / ".cache" / "jax"
 jax.config.update("jax_compilation_cache_dir", os.environ.get("DPC_JAX_CACHE", str(_CACHE)))

@@ -120,8 +120,9 @@ def _toy(episodes: int = EPISODES, steps: int = STEPS, seed: int = SEED) -> dict
 
 def _reaching() -> dict:
     """20 steps of 4 reaching episodes (MBC), and 90 random-motion samples from 3 envs."""
-    out = rollout.run_episodes(make(DEFAULT_TASK, arm="regular"), 4, 20, seed=3, chunk=10)
-    env = make(DEFAULT_TASK, arm="regular", controller="mbc")
+    # MJX on every device count ('auto' would pick native MuJoCo C on one CPU device)
+    out = rollout.run_episodes(make(DEFAULT_TASK, arm="regular", engine="mjx"), 4, 20, 3, chunk=10)
+    env = make(DEFAULT_TASK, arm="regular", controller="mbc", engine="mjx")
     data = adapter.collect(env, 90, n_envs=3, seed=5, chunk=10, progress=False)
     names = ("s_body", "s_arm", "s_drp_next", "env_id", "u_oracle")
     return out | {f"data_{k}": getattr(data, k) for k in names}

@@ -9,6 +9,7 @@ shipped then, which is gone.
 
 `tests/data/eval_regression_shipped.json`, recorded when the present export was shipped (see its
 `recorded` key): all four controllers on the shipped export with its env options (sensors on).
+Both were recorded in MJX, which these tests ask for by name (a CPU's default is native MuJoCo C).
 
 Seed 4242 chose nothing. The episodes are short (100 env steps, 2 s), so that a change of
 arithmetic shows as a small drift of the continuous metrics rather than as other episodes. On one
@@ -52,6 +53,7 @@ SUM_TOL = 0.1  # of the largest recorded value of the metric in the cell
 EXACT_KEYS = ("fell", "length", "measured", "nan")
 # The env options of the 84660d8 recording: the reaching task then, with exact sensors
 EXACT_SENSORS = {"sensor_noise": 0.0, "sensor_delay": 0}
+MJX = {"engine": "mjx"}  # the recordings' physics (a CPU's default is native MuJoCo C)
 
 
 def _recording(path: pathlib.Path) -> dict:
@@ -84,6 +86,7 @@ def _evaluate_shipped(csv_path=None, controllers=None):
         steps=STEPS,
         seed=SEED,
         csv=csv_path,
+        env=MJX,
     )
 
 
@@ -121,7 +124,7 @@ def test_exact_sensors_evaluate_as_the_envs_before_the_sensor_model():
         episodes=EPISODES,
         steps=STEPS,
         seed=SEED,
-        overrides=EXACT_SENSORS,
+        overrides=EXACT_SENSORS | MJX,
         progress=False,
     )
     _assert_as_recorded(cells, recording)

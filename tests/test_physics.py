@@ -19,8 +19,17 @@ from mujoco import mjx
 import dpc_mjx
 from dpc_mjx import sim
 from dpc_mjx.envs import DEFAULT_TASK
+from dpc_mjx.envs.registry import get_config
 from dpc_mjx.errors import DpcError
-from dpc_mjx.physics import _BAD_STATE, INPUTS, OUTPUTS, NativePhysics, make_physics
+from dpc_mjx.physics import (
+    _BAD_STATE,
+    AUTO,
+    INPUTS,
+    OUTPUTS,
+    NativePhysics,
+    make_physics,
+    resolve_engine,
+)
 from dpc_mjx.robots import build
 from dpc_mjx.run.cli import main
 from dpc_mjx.run.eval import evaluate
@@ -256,3 +265,23 @@ def test_engine_errors(model):
         NativePhysics(model, threads=0)
     with pytest.raises(DpcError, match="mocap bodies"):
         NativePhysics(spec.compile())
+
+
+def test_the_default_engine_is_native_on_one_cpu_device_and_mjx_elsewhere(model, monkeypatch):
+    """'auto' (`EnvConfig`'s default): native MuJoCo C on this one-device CPU, and the built env's
+    config names it; MJX on an accelerator, over several devices, or for a model whose state the
+    native engine does not copy (mocap bodies)."""
+    assert get_config(DEFAULT_TASK).engine == AUTO
+    env = dpc_mjx.make(DEFAULT_TASK, arm="none")  # builds, compiles nothing
+    assert env.config.engine == "native" and isinstance(env.physics, NativePhysics)
+    assert dpc_mjx.make(DEFAULT_TASK, arm="none", engine="mjx").config.engine == "mjx"
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_body(name="target", mocap=True).add_geom(size=[0.1, 0, 0])
+    assert (resolve_engine(AUTO, model), resolve_engine(AUTO, spec.compile())) == ("native", "mjx")
+    monkeypatch.setattr(jax, "device_count", lambda: 2)
+    assert resolve_engine(AUTO, model) == "mjx"
+    monkeypatch.setattr(jax, "device_count", lambda: 1)
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert resolve_engine(AUTO, model) == "mjx" and resolve_engine("native") == "native"
+    with pytest.raises(DpcError, match="engine='bullet' is not valid"):
+        resolve_engine("bullet")

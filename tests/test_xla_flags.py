@@ -11,19 +11,21 @@ import dpc_mjx
 from dpc_mjx import xla_flags
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "dpc_mjx"
-FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
-NEEDS = next(iter(xla_flags.NEEDS_FLAG))
+SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 
 
-def test_the_flag_is_set_only_where_xla_flags_is_unset_on_a_jaxlib_that_needs_it():
-    assert xla_flags.FLAG == FLAG
-    assert xla_flags.flags_for({}, NEEDS) == FLAG
-    assert xla_flags.flags_for({"JAX_PLATFORMS": "cpu"}, NEEDS) == FLAG
-    assert xla_flags.flags_for({"JAX_PLATFORMS": "cuda, cpu"}, NEEDS) == FLAG
-    assert xla_flags.flags_for({"JAX_PLATFORMS": "cuda"}, NEEDS) is None  # no CPU backend
-    for users in ("", " ", "--xla_cpu_max_isa=AVX2", FLAG.replace("false", "true")):
-        assert xla_flags.flags_for({"XLA_FLAGS": users}, NEEDS) is None
-    assert xla_flags.flags_for({}, "0.9.2") is None  # measured: runs without it
+def test_the_flags_are_set_only_where_xla_flags_is_unset_on_a_jaxlib_measured_with_them():
+    assert (xla_flags.SCHEDULER, xla_flags.OLDER_EMITTERS) == (SCHEDULER, EMITTERS)
+    assert xla_flags.flags_for({}, "0.10.2") == SCHEDULER  # hung without it
+    assert xla_flags.flags_for({}, "0.9.2") == EMITTERS  # compiles a third faster
+    assert xla_flags.flags_for({"JAX_PLATFORMS": "cpu"}, "0.9.2") == EMITTERS
+    assert xla_flags.flags_for({"JAX_PLATFORMS": "cuda, cpu"}, "0.10.2") == SCHEDULER
+    assert xla_flags.flags_for({"JAX_PLATFORMS": "cuda"}, "0.9.2") is None  # no CPU backend
+    for users in ("", " ", "--xla_cpu_max_isa=AVX2", SCHEDULER.replace("false", "true")):
+        assert xla_flags.flags_for({"XLA_FLAGS": users}, "0.9.2") is None
+        assert xla_flags.flags_for({"XLA_FLAGS": users}, "0.10.2") is None
+    assert xla_flags.flags_for({}, "0.11.2") is None  # not measured: XLA may not know them
     assert xla_flags.flags_for({}, None) is None  # no jaxlib installed
 
 
@@ -44,16 +46,17 @@ def test_import_leaves_a_users_xla_flags_byte_identical_and_loads_no_subpackage(
         "sys.modules if m.split('.')[0] in ('dpc_mjx', 'jax', 'jaxlib', 'mujoco', 'brax')))"
     )
     eager = "['dpc_mjx', 'dpc_mjx._version', 'dpc_mjx.errors', 'dpc_mjx.xla_flags']"
-    for users in ("", "  --xla_cpu_enable_fast_math=false  ", FLAG.replace("false", "true")):
+    for users in ("", "  --xla_cpu_enable_fast_math=false  ", EMITTERS.replace("false", "true")):
         assert _fresh_python(code, users).splitlines() == [repr(users), eager]
 
 
-def test_import_sets_the_flag_only_on_a_jaxlib_that_needs_it_and_jax_starts():
+def test_import_sets_the_jaxlibs_flags_and_jax_starts_with_them():
     code = (
         "import os, dpc_mjx, jax.numpy as jp; assert float(jp.ones(3).sum()) == 3.0; "
         "print(repr(os.environ.get('XLA_FLAGS')))"
     )
-    expected = FLAG if xla_flags.jaxlib_version() in xla_flags.NEEDS_FLAG else None
+    flags = xla_flags.FLAGS_BY_JAXLIB.get(xla_flags.jaxlib_version())
+    expected = " ".join(flags) if flags else None
     assert _fresh_python(code, None).strip() == repr(expected)
 
 

@@ -2,8 +2,9 @@
 
 One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller tick -> physics
 step] at the physics rate (250 Hz), with u chosen by `config.controller`. The physics step is
-`mjx.step`, or MuJoCo C's `mj_step` on the same model with `config.engine = 'native'`
-(`dpc_mjx/physics.py`: sim-to-sim); everything else is the same code under both engines.
+`mjx.step`, or MuJoCo C's `mj_step` on the same model with `config.engine = 'native'` (by
+default native on a CPU, MJX on an accelerator: `dpc_mjx/physics.py`); everything else is the
+same code under both engines.
 
     'dpc'   : u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)   ('policy' too)
               in the yaw frame (turned to the world at each tick) or the world frame
@@ -67,7 +68,7 @@ from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, make_sampler
 from dpc_mjx.envs.outcome import METRICS
 from dpc_mjx.errors import DpcError
-from dpc_mjx.physics import make_physics
+from dpc_mjx.physics import make_physics, resolve_engine
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.objects import prop_layout
@@ -86,6 +87,8 @@ class DpcEnv(Env):
         self.config = config
         arm = getattr(self, "DEFAULT_ARM", "regular") if arm is None else arm  # a task's default
         self.model = self.build_model(on_base(resolve(arm), config.base))
+        # 'auto' -> the engine that runs (`physics.resolve_engine`), so config.engine names it
+        self.config = config = config.replace(engine=resolve_engine(config.engine, self.model))
         timestep = float(self.model.opt.timestep)
         n_sub = round(config.policy_dt / timestep)
         if n_sub < 1 or abs(n_sub * timestep - config.policy_dt) > 1e-9:

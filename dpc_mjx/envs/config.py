@@ -22,7 +22,7 @@ from typing import Any
 
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
-from dpc_mjx.physics import ENGINES
+from dpc_mjx.physics import ENGINE_CHOICES
 
 CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
@@ -80,9 +80,11 @@ class EnvConfig:
     gait: str = "trot"  # 'trot' or 'stand'
     policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
-    # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device) or 'native' (MuJoCo C
-    # on the same model, threads on the host: sim-to-sim, and the faster path on a CPU)
-    engine: str = "mjx"
+    # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device), 'native' (MuJoCo C on
+    # the same model, on the host: the faster path on a CPU, and sim-to-sim) or 'auto' (native
+    # on one CPU device, MJX on an accelerator: `physics.resolve_engine`); a built env's
+    # `config.engine` is the one it resolved to
+    engine: str = "auto"
     # The quadruped: a name of `robots.base_file.NAMED_BASES` ('a1', 'go1', 'go2', 'b1', 'b1-z1')
     # or the path of its .urdf, MJCF .xml (or .json) file, read when the env is built
     # (`robots.base_model`).
@@ -218,7 +220,7 @@ class EnvConfig:
         """Raise `DpcError` naming the first invalid field and what it must be."""
         Controller.parse(self.controller)
         _choice("gait", self.gait, GAITS)
-        _choice("engine", self.engine, ENGINES)
+        _choice("engine", self.engine, ENGINE_CHOICES)
         _choice("u_frame", self.u_frame, U_FRAMES)
         if not isinstance(self.base, str) or not self.base:
             raise DpcError(

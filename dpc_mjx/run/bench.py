@@ -28,7 +28,7 @@ HEADER = (
 
 def bench_env(arm: str, batch: int, calls: int, task: str = DEFAULT_TASK) -> dict:
     """{'env_sps', 'phys_sps' (env steps/s), 'env_compile', 'phys_compile' (s)} at `batch`."""
-    env = make(task, arm=arm)
+    env = make(task, arm=arm, engine="mjx")  # beside MJX physics alone, on any device
     carry, key = rollout.start(env, batch, seed=0)
     step = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, chunk=1)
     c_env, t_env, _ = time_calls(lambda c: step(c, key)[0], carry, calls)

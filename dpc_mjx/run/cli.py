@@ -7,7 +7,7 @@
     dpc-mjx transfer --export DIR --arm so100    a new arm's encoder against the frozen decoder
                                        (--arm my_arm.urdf, .xml or .json: your own arm)
     dpc-mjx eval --export DIR          MBC / observer / DPC / oracle, protocol of docs/results.md
-                                       (--engine native: MuJoCo C instead of MJX)
+                                       (--engine: native MuJoCo C, the CPU default, or mjx)
     dpc-mjx sim2sim --export DIR       the same cells in MJX and in native MuJoCo, side by side
     dpc-mjx sweep --upper-arm 0.10:0.30:8 --gripper-mass 0.1:0.6:8   every controller over a
                                        grid of arms, one batched model (CSV and heatmaps)
@@ -101,11 +101,13 @@ def _transfer(args: argparse.Namespace) -> None:
 
 def _eval(args: argparse.Namespace) -> None:
     from dpc_mjx.io.shipped import shipped_for  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.physics import AUTO, resolve_engine  # noqa: PLC0415
     from dpc_mjx.run.pipeline import evaluate_export  # noqa: PLC0415 (subcommand handler)
 
-    prefix = "native-" if args.engine == "native" else ""
+    env = _env_options(args)
+    prefix = "native-" if resolve_engine(env.get("engine", AUTO)) == "native" else ""
     export = args.export or shipped_for(args.base)
-    evaluate_export(export, **_cells(args, prefix), env=_env_options(args))
+    evaluate_export(export, **_cells(args, prefix), env=env)
 
 
 def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
@@ -246,8 +248,8 @@ def _evaluation_commands(sub) -> None:
     p.add_argument(
         "--engine",
         choices=["mjx", "native"],
-        help="physics: mjx (default) or native MuJoCo C (the same results up to the engines' "
-        "differences; faster on a CPU, docs/benchmarks.md)",
+        help="physics: native MuJoCo C (the default on a CPU: faster there, docs/benchmarks.md) "
+        "or mjx (the default on an accelerator); the same results up to the engines' differences",
     )
     p.set_defaults(handler=_eval)
 
@@ -287,7 +289,9 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", help="also write the table to this markdown file")
     env = "env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact sensors)"
     add_env_options(p, env)
-    csv = "one row per episode (default: beside --out, else runs/eval/<task>-seed<seed>.csv)"
+    csv = (
+        "one row per episode (default: beside --out, else runs/eval/[native-]<task>-seed<seed>.csv)"
+    )
     p.add_argument("--csv", help=csv)
 
 

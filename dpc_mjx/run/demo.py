@@ -9,13 +9,13 @@ import datetime
 import pathlib
 import time
 
-import jax
 import numpy as np
 
 from dpc_mjx import sim
 from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.state import has_fallen
 from dpc_mjx.controllers import Controller
+from dpc_mjx.physics import AUTO, resolve_engine
 from dpc_mjx.robots import VARIANTS, build, resolve
 from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
@@ -107,18 +107,12 @@ QUICK = DEMO | {
 }
 
 
-def demo_engine(engine: str | None = None) -> str:
-    """The demo's physics: `engine`, or by default MuJoCo C ('native') where JAX runs on the CPU
-    and MJX on an accelerator (the env compiles about 3x faster natively on a CPU:
-    docs/benchmarks.md, "The env against MuJoCo C's physics alone")."""
-    return engine or ("native" if jax.default_backend() == "cpu" else "mjx")
-
-
 def run_demo(quick: bool = False, run_dir: str | None = None, engine: str | None = None) -> dict:
     """Data, adapter, policy, export and evaluation of the regular arm on the reaching task with
-    a small budget, on `demo_engine(engine)`; prints the stages, the evaluation table and one
-    MBC / observer / DPC line."""
-    engine = demo_engine(engine)
+    a small budget, on `engine` (default: the env's, `physics.resolve_engine`: native MuJoCo C
+    on a CPU, MJX on an accelerator); prints the stages, the evaluation table and one MBC /
+    observer / DPC line."""
+    engine = resolve_engine(engine or AUTO)
     config = RunConfig().replace(**(QUICK if quick else DEMO), **{"env.engine": engine})
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     run = pathlib.Path(run_dir or f"runs/demo-{stamp}")

@@ -20,18 +20,24 @@ own encoder).
 
 from __future__ import annotations
 
+import collections
 import csv
 import dataclasses
+import os
 import pathlib
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from itertools import islice
 
+import jax
 import numpy as np
 
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.registry import DEFAULT_TASK, make, resolve_arm
 from dpc_mjx.envs.rollout import Policy, run_episodes
 from dpc_mjx.errors import DpcError
+from dpc_mjx.physics import AUTO, ENGINE_NAMES, resolve_engine
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 from dpc_mjx.writer import is_writer
@@ -149,11 +155,15 @@ def evaluate(
     overrides: dict | None = None,
     on_result: Callable[[CellResult], None] | None = None,
     progress: bool = True,
+    workers: int | None = None,
 ) -> list[CellResult]:
     """Every (arm, controller) cell of the protocol on `task`; an arm is a variant name or an arm
     (`robots.UrdfArm`, ...), its cells labelled `robots.arm_name(arm)`; `dpc_policy_for(name)`
     gives the DPC policy of an arm (its encoder + the shared actor), needed for 'dpc'; `steps`
-    per episode default to the task's episode length (`EnvConfig.episode_length`)."""
+    per episode default to the task's episode length (`EnvConfig.episode_length`). `workers`
+    cells run at once, each in a thread of its own (default `cell_workers`), so one compiles
+    while another runs; the results, and `on_result`'s calls, come in cell order and are those
+    of one cell at a time."""
     controllers = Controller.parse_all(controllers)
     if Controller.DPC in controllers and dpc_policy_for is None:
         raise DpcError("Evaluating 'dpc' needs a trained policy: pass dpc_policy_for (or --run).")
@@ -161,20 +171,40 @@ def evaluate(
         raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
     for arm in arms:
         resolve_arm(arm)  # every arm checked (the A1 holds it up) before the first compile
-    results = []
-    for arm in arms:
-        name = arm_name(arm)
-        policy_for_arm = dpc_policy_for(name) if Controller.DPC in controllers else None
-        for controller in controllers:
-            env = make(task, arm=arm, controller=controller, **(overrides or {}))
-            policy = policy_for_arm if controller == Controller.DPC else None
-            n_steps = env.config.episode_length if steps is None else steps
-            label = controller.value  # the cell's controller, a plain string in tables and CSVs
-            cell = evaluate_env(env, name, label, episodes, n_steps, seed, policy, progress)
-            results.append(cell)
+    dpc = Controller.DPC in controllers
+    policies = {arm_name(arm): dpc_policy_for(arm_name(arm)) for arm in arms} if dpc else {}
+
+    def cell(arm: str | Arm, controller: Controller) -> CellResult:
+        env = make(task, arm=arm, controller=controller, **(overrides or {}))
+        policy = policies[arm_name(arm)] if controller == Controller.DPC else None
+        n_steps = env.config.episode_length if steps is None else steps
+        label = controller.value  # the cell's controller, a plain string in tables and CSVs
+        return evaluate_env(env, arm_name(arm), label, episodes, n_steps, seed, policy, progress)
+
+    jobs = iter([(arm, controller) for arm in arms for controller in controllers])
+    results, n = [], workers or cell_workers(resolve_engine((overrides or {}).get("engine", AUTO)))
+    with ThreadPoolExecutor(n) as pool:
+        # a window of `workers` cells in flight, the oldest awaited first: a failed cell raises
+        # once the cells in flight end, and no later cell starts
+        flight = collections.deque(pool.submit(cell, *j) for j in islice(jobs, n))
+        while flight:
+            results.append(flight.popleft().result())
             if on_result is not None:
-                on_result(cell)
+                on_result(results[-1])
+            flight.extend(pool.submit(cell, *j) for j in islice(jobs, 1))
     return results
+
+
+def cell_workers(engine: str) -> int:
+    """Cells evaluated at once by default: 2 for the native engine where JAX runs on the CPU of
+    one process with two or more cores (a cell's XLA compile, which holds one core, overlaps
+    another cell's run: docs/benchmarks.md, "Evaluation cells two at a time"), else 1 (MJX,
+    whose cells compile longer and in more memory, measured 4.2 GB for a train's two at once
+    against 3.0 GB one at a time; an accelerator; several processes, whose collectives must meet
+    in the same order)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    on_cpu = jax.default_backend() == "cpu" and jax.process_count() == 1
+    return 2 if engine == "native" and on_cpu and (cores or 1) >= 2 else 1
 
 
 TABLE_HEADER = (
@@ -328,9 +358,9 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
 
 def evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[CellResult]:
     """`evaluate`, printing the table row by row, writing it to `out` (markdown) and every
-    episode to `csv` (`write_episodes_csv`). A line above the table names a native engine."""
-    engine = (kwargs.get("overrides") or {}).get("engine", "mjx")
-    preface = [] if engine == "mjx" else [f"physics: {engine} MuJoCo C (engine={engine!r})", ""]
+    episode to `csv` (`write_episodes_csv`). A line above the table names the engine."""
+    engine = resolve_engine((kwargs.get("overrides") or {}).get("engine", AUTO))
+    preface = [f"physics: {ENGINE_NAMES[engine]} (engine={engine!r})", ""]
     print("\n".join([*preface, TABLE_HEADER]), flush=True)
 
     def show(cell: CellResult) -> None:

@@ -158,6 +158,7 @@ def sweep(
     artefacts, (arm,), overrides = export_cells(export or SHIPPED, None, controllers, task, env)
     if overrides.get("engine", "mjx") != "mjx":
         raise DpcError("A sweep runs one batched MJX model; drop engine=native from --env.")
+    overrides = {**overrides, "engine": "mjx"}  # on a CPU too (the default there is native)
     ua, gm = (a.ravel() for a in np.meshgrid(uppers, masses, indexing="ij"))  # (G,) row-major
     points = len(ua)
     cells, seconds = {}, {}
