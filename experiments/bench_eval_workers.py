@@ -14,7 +14,6 @@ bit for bit.
 from __future__ import annotations
 
 import argparse
-import time
 
 import jax
 import numpy as np
@@ -22,25 +21,26 @@ import numpy as np
 from dpc_mjx import io
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate
+from dpc_mjx.timing import Stopwatch
 
 CONTROLLERS = ("mbc", "observer", "dpc", "oracle")
 
 
 def run(workers: int, args: argparse.Namespace, art) -> tuple[float, list]:
     """(wall s, cells) of the four cells with `workers` cells at a time."""
-    t0 = time.perf_counter()
-    cells = evaluate(
-        ["regular"],
-        list(CONTROLLERS),
-        episodes=args.episodes,
-        steps=args.steps,
-        seed=args.seed,
-        dpc_policy_for=art.dpc_policy,
-        overrides=env_overrides(art),  # the export's env options, as `dpc-mjx eval`
-        progress=False,
-        workers=workers,
-    )
-    return time.perf_counter() - t0, cells
+    with Stopwatch() as clock:
+        cells = evaluate(
+            ["regular"],
+            list(CONTROLLERS),
+            episodes=args.episodes,
+            steps=args.steps,
+            seed=args.seed,
+            dpc_policy_for=art.dpc_policy,
+            overrides=env_overrides(art),  # the export's env options, as `dpc-mjx eval`
+            progress=False,
+            workers=workers,
+        )
+    return clock.seconds, cells
 
 
 def same(a: list, b: list) -> bool:
