@@ -1,11 +1,11 @@
 """Evaluation cells one at a time against two at a time (`run.eval.evaluate(workers=...)`).
 
-    .venv/bin/python -u experiments/bench_eval_workers.py [--episodes 64] [--steps 1000]
+    .venv/bin/python -u experiments/bench_eval_workers.py [--episodes 64] [--workers 1 2 1]
 
 In one run: the shipped export's four cells (MBC, observer, DPC, oracle on `regular`, with the
 export's env options and the default engine: native MuJoCo C on a CPU), `--episodes` episodes of
-`--steps` env steps from seed `--seed`, evaluated with `workers=1`, then `workers=2`, then
-`workers=1` again (each a fresh compile: every cell builds its env and jits anew, and the native
+`--steps` env steps from seed `--seed`, evaluated once per `--workers` entry (default 1, then 2,
+then 1 again; each a fresh compile: every cell builds its env and jits anew, and the native
 engine's programs never reach JAX's persistent cache). Printed: the wall time of the whole
 evaluation per row and whether every per-episode figure of every cell equals the first row's,
 bit for bit.
@@ -57,12 +57,13 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=64)
     p.add_argument("--steps", type=int, default=1000)
     p.add_argument("--seed", type=int, default=1000)
+    p.add_argument("--workers", type=int, nargs="+", default=[1, 2, 1], help="one run each")
     args = p.parse_args()
     art = io.load(SHIPPED)
     print(f"4 cells x {args.episodes} episodes x {args.steps} steps, {jax.devices()[0]}\n")
     print("| run | workers | wall (s) | cells as the first run's |\n|---|---|---|---|")
     first = None
-    for i, workers in enumerate((1, 2, 1)):
+    for i, workers in enumerate(args.workers):
         wall, cells = run(workers, args, art)
         first = first or cells
         print(f"| {i + 1} | {workers} | {wall:.1f} | {'yes' if same(cells, first) else 'NO'} |")

@@ -30,6 +30,7 @@ from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.envs.rollout import run_episodes
 from dpc_mjx.errors import DpcError
 from dpc_mjx.io.shipped import SHIPPED, export_cells
+from dpc_mjx.physics import AUTO
 from dpc_mjx.robots.params import batch_arm_params
 from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.run.eval import CONTROLLERS, CellResult, cell_result, write_episodes_csv
@@ -156,7 +157,7 @@ def sweep(
     if episodes < 1 or (steps is not None and steps < 1):
         raise DpcError(f"episodes and steps must be >= 1, got {episodes} and {steps}.")
     artefacts, (arm,), overrides = export_cells(export or SHIPPED, None, controllers, task, env)
-    if overrides.get("engine", "mjx") != "mjx":
+    if overrides.get("engine", AUTO) not in (AUTO, "mjx"):
         raise DpcError("A sweep runs one batched MJX model; drop engine=native from --env.")
     overrides = {**overrides, "engine": "mjx"}  # on a CPU too (the default there is native)
     ua, gm = (a.ravel() for a in np.meshgrid(uppers, masses, indexing="ij"))  # (G,) row-major
