@@ -41,7 +41,8 @@ demo: $(STAMP)
 # the order tests/conftest.py gives them (longest first; xdist would otherwise reorder them by
 # test count and leave the long few-test files to the end); the JAX compilation cache in
 # .cache/jax (tests/conftest.py) serves repeated compiles, and XLA's older fusion emitters
-# (tests/conftest.py, when XLA_FLAGS is unset) compile a third faster.
+# (set by `import dpc_mjx` on jaxlib 0.9.2 when XLA_FLAGS is unset: dpc_mjx/xla_flags.py)
+# compile a third faster.
 PYTEST_ARGS := -q -n 2 --dist loadfile --no-loadscope-reorder
 PYTEST := $(BIN)/python -m pytest $(PYTEST_ARGS)
 

@@ -46,7 +46,7 @@ SEED, EPISODES, STEPS = 4242, 4, 100
 # returns within 5.7e-4 (relative), every squared-error sum within 2.9e-2 of the largest recorded
 # value of that metric in the cell (a sum of small squares over 100 steps amplifies a rounding
 # difference; relative to a single small sum it reached 7e-2). Compiled with XLA's older fusion
-# emitters, as the suite is (tests/conftest.py; 2026-12-03): DPC's episodes within 7.6 % of these
+# emitters, as the suite is (dpc_mjx/xla_flags.py; 2026-12-03): DPC's episodes within 7.6 % of these
 # tolerances, the exact keys exact.
 RTOL_RETURN = 2e-3
 SUM_TOL = 0.1  # of the largest recorded value of the metric in the cell
