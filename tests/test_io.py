@@ -399,6 +399,39 @@ def test_observer_input_policy_round_trips_and_runs_in_numpy(trained, tmp_path):
         dio.load(out)
 
 
+def test_a_policy_on_the_observer_adds_u_obs_in_numpy_as_the_env_does(trained, exported, tmp_path):
+    """u_base='observer': the sidecar records the base and the observer, and the numpy runner's
+    u is the observation's u_obs plus the policy's u_scale * a, turned by the heading: by
+    linearity the env's u of a tick, the tick's estimate (world) plus the policy's u turned
+    (`DpcEnv.controller_u`, `LowLevelController.step(add_estimate=True)`)."""
+    config = ENV_CONFIG.replace(u_base="observer", observer_gain=40.0)
+    out = dio.export(
+        tmp_path / "residual",
+        adapter_config=CONFIG,
+        policy=trained["policy"],
+        decoder=trained["decoder"],
+        encoders={"regular": trained["encoders"]["regular"]},
+        arms={"regular": "regular"},
+        env_config=config,
+    )
+    scaling = json.loads((out / "dpc.json").read_text())["action_scaling"]
+    assert scaling["base"] == "observer" and scaling["observer"]["gain"] == 40.0
+    obs = _obs(N_IN["regular"] + 6, seed=13)  # [s_body, s_arm, p_arm, u_obs (yaw frame)]
+    yaw = np.linspace(-3.0, 3.0, len(obs))
+    policy, paper = NumpyPolicy(out, "regular"), NumpyPolicy(exported, "regular")
+    residual = policy.residual(obs)
+    np.testing.assert_allclose(residual, paper.u(obs), atol=1e-12)  # the same actor
+    u_obs_world = np.asarray(wrench_to_world(obs[:, -6:], yaw))
+    expected = u_obs_world + np.asarray(wrench_to_world(residual, yaw))
+    np.testing.assert_allclose(policy.u(obs, yaw), expected, atol=_NUMPY_TOL * 50.0, rtol=0)
+    np.testing.assert_allclose(policy.u(obs), obs[:, -6:] + residual, atol=1e-12)
+    with pytest.raises(ValueError, match="has 32 entries per row"):
+        policy.u(obs[:, : N_IN["regular"]])  # u_obs missing: refused, not guessed
+    _edit_sidecar(lambda m: m["action_scaling"].update(base="zero"))(out)
+    with pytest.raises(DpcError, match="action_scaling.base.*env_config.u_base"):
+        dio.load(out)
+
+
 def test_numpy_policy_rejects_bad_input(exported, export_copy):
     policy = NumpyPolicy(exported, "regular")
     with pytest.raises(

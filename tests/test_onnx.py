@@ -154,6 +154,30 @@ def test_observer_input_world_frame_export(tmp_path):
     assert np.abs(session.run(None, {"observation": changed})[0] - u).max() > 1e-3
 
 
+def test_a_policy_on_the_observer_adds_u_obs_in_the_graph(tmp_path):
+    """u_base='observer': the graph's u is u_obs + u_scale * a, as `NumpyPolicy.u(obs)`."""
+    ort = pytest.importorskip("onnxruntime")
+    art = load(SHIPPED)
+    out = export(
+        tmp_path / "residual",
+        adapter_config=art.adapter_config,
+        policy=art.policy,
+        decoder=art.decoder,
+        encoders={"z1": art.encoder("z1")},
+        arms={"z1": art.arm_spec("z1")},
+        env_config=EnvConfig(u_base="observer"),
+    )
+    model = onnx_graph.onnx_model(out, "z1")
+    session = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
+    obs = _observations()["z1"]
+    policy = NumpyPolicy(out, "z1")
+    (u,) = session.run(None, {"obs": obs})
+    expected = policy.u(obs)
+    err = np.abs(u - expected) / np.maximum(1.0, np.abs(expected))
+    assert err.max() <= TOL, f"max |du| / max(1, |u|) = {err.max():.2e}"
+    np.testing.assert_allclose(expected - obs[:, -6:], policy.residual(obs), atol=1e-9)
+
+
 def test_cli_writes_a_graph_with_a_dynamic_batch_axis(tmp_path, capsys):
     ort = pytest.importorskip("onnxruntime", reason="the onnx extra: pip install 'dpc-mjx[onnx]'")
     out = tmp_path / "graphs" / "policy.onnx"

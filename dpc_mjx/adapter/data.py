@@ -35,7 +35,7 @@ from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
 from dpc_mjx.envs.wrappers import wrap_for_training
 from dpc_mjx.errors import DpcError
 from dpc_mjx.progress import bar
-from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
+from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world, wrench_to_yaw_frame
 
 DRP = S_BODY_DRP  # roll and pitch rate (rad/s, trunk frame) inside s_body
 # The per-row columns of a `Dataset` (s_body first)
@@ -90,6 +90,15 @@ class Dataset:
         if frame == "world":
             return self.u_oracle
         return np.asarray(wrench_to_yaw_frame(self.u_oracle, self.yaw), np.float32)
+
+    def u_obs_in(self, frame: str) -> np.ndarray:
+        """(N, 6) the observer's estimate in `frame` ('yaw', as observed, or 'world': turned
+        back by the heading `yaw`)."""
+        if self.u_obs is None or (frame == "world" and self.yaw is None):
+            raise DpcError("This dataset has no u_obs (or yaw) column; collect it again.")
+        if frame == "yaw":
+            return self.u_obs
+        return np.asarray(wrench_to_world(self.u_obs, self.yaw), np.float32)
 
     def take(self, rows: slice | np.ndarray) -> Dataset:
         columns = {k: getattr(self, k) for k in _ROWS}

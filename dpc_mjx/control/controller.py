@@ -152,17 +152,24 @@ class LowLevelController:
         u: jax.Array | None,
         arm_targets: jax.Array | None = None,
         noise: sensors.SensorNoise | None = None,
+        add_estimate: bool = False,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
-        the disturbance observer's estimate of this tick (the `observer` controller); `noise`
-        the measurement errors of this tick (`control/sensors.py`; None: exact sensors).
+        the disturbance observer's estimate of this tick (the `observer` controller), or with
+        `add_estimate` a residual added to that estimate (DPC on the observer,
+        `EnvConfig.u_base`); `noise` the measurement errors of this tick
+        (`control/sensors.py`; None: exact sensors).
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
         cfg = self.config
         p = self.plan(cs, d, command, noise)
         s, stance, progress, vel_des = p.state, p.stance, p.progress, p.vel_des
         observed = self._observe(cs, s)  # this tick's data, the previous tick's forces
-        prob = self.balance_qp(p, observed.estimate if u is None else u)
+        if u is None:
+            u = observed.estimate
+        elif add_estimate:
+            u = observed.estimate + u
+        prob = self.balance_qp(p, u)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
         )

@@ -8,7 +8,7 @@ same code under both engines.
 
     'dpc'   : u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)   ('policy' too)
               in the yaw frame (turned to the world at each tick) or the world frame
-              (`EnvConfig.u_frame`)
+              (`EnvConfig.u_frame`); with `u_base='observer'` added to the observer's estimate
     'mbc'   : u = 0, the action is ignored                                       (paper baseline)
     'oracle': u = measured arm-mount wrench (`controller.oracle_u`), action ignored
     'observer': u = the momentum observer's estimate (`control/observer.py`), action ignored
@@ -61,7 +61,6 @@ from mujoco import mjx
 from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
 from dpc_mjx.control.controller import make_controller, oracle_u
-from dpc_mjx.control.observer import ObserverConfig
 from dpc_mjx.control.state import has_fallen
 from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
@@ -100,12 +99,8 @@ class DpcEnv(Env):
         self.lay = layout(self.model)
         self.mx = sim.put_model(self.model)
         self.physics = make_physics(config.engine, self.model, self.mx)
-        gain = config.observer_gain  # rad/s, one or (force, torque)
-        k_force, k_torque = gain if isinstance(gain, tuple) else (gain, gain)
-        delay = config.sensor_delay if config.observer_aligned else 0  # ticks
-        observer = ObserverConfig(k_force=k_force, k_torque=k_torque, delay=delay)
         self.controller = make_controller(
-            self.model, gait_=_GAITS[config.gait](), observer=observer
+            self.model, gait_=_GAITS[config.gait](), observer=config.observer_config()
         )
         self.props = prop_layout(self.model)
         self.sampler = make_sampler(config, self.model, self.lay, len(self.props.objects))
@@ -301,7 +296,8 @@ class DpcEnv(Env):
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
             u = self.controller_u(d, u_policy)
             targets = self.arm_targets(dist, d.time, d)
-            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise)
+            add = self.config.adds_observer_estimate
+            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise, add)
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
             xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
@@ -324,7 +320,8 @@ class DpcEnv(Env):
     def controller_u(self, d, u_policy: jax.Array) -> jax.Array | None:
         """(6,) u of this tick for the controller (world frame, about the base's COM), by
         `config.controller`, or None for the observer's own estimate; `u_policy` from
-        `policy_u` (used by 'dpc' only)."""
+        `policy_u` (used by 'dpc' only; with `u_base` 'observer' the controller adds it to
+        the observer's estimate of the tick, `config.adds_observer_estimate`)."""
         if self.config.controller == "mbc":
             return jp.zeros(ACTION_SIZE)
         if self.config.controller == "oracle":

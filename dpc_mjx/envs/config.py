@@ -20,12 +20,14 @@ import dataclasses
 import math
 from typing import Any
 
+from dpc_mjx.control.observer import ObserverConfig
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import ENGINE_CHOICES
 
 CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
+U_BASES = ("zero", "observer")  # what DPC's policy u is added to (`EnvConfig.u_base`)
 GAITS = ("trot", "stand")
 
 
@@ -103,6 +105,11 @@ class EnvConfig:
     # The policy observes nothing of the heading (s_body and u_obs are yaw-frame), so only a
     # yaw-frame u can follow the arm's moments as the robot turns (docs/results.md, ablation).
     u_frame: str = "yaw"
+    # What the policy's u is added to ('dpc' only): 'zero' (the paper: u = the policy's u) or
+    # 'observer' (u = the disturbance observer's estimate of each tick, world frame, + the
+    # policy's u: the policy is a learned residual of the classical estimate, trained on
+    # u_oracle - u_obs, `policy.regression`)
+    u_base: str = "zero"
     max_force: float | tuple[float, float, float] = (15.0, 15.0, 60.0)  # N
     max_torque: float | tuple[float, float, float] = (12.0, 12.0, 3.0)  # N·m
 
@@ -199,6 +206,19 @@ class EnvConfig:
         """(6,) N, N, N, N·m, N·m, N·m: u = u_scale * a for an action a in [-1, 1]^6."""
         return _per_axis(self.max_force) + _per_axis(self.max_torque)
 
+    def observer_config(self) -> ObserverConfig:
+        """The disturbance observer these fields configure (gains; delay if aligned)."""
+        gain = self.observer_gain  # rad/s, one or (force, torque)
+        k_force, k_torque = gain if isinstance(gain, tuple) else (gain, gain)
+        delay = self.sensor_delay if self.observer_aligned else 0  # ticks
+        return ObserverConfig(k_force=k_force, k_torque=k_torque, delay=delay)
+
+    @property
+    def adds_observer_estimate(self) -> bool:
+        """Whether the controller adds the observer's estimate to the given u (DPC with
+        `u_base` 'observer')."""
+        return self.controller == Controller.DPC and self.u_base == "observer"
+
     def replace(self, **overrides: Any) -> EnvConfig:
         """A validated copy with `overrides` by field name, or a whole part by its name
         (`sensors=SensorConfig(0.0, 0)`, or a dict of some of its fields); unknown names raise
@@ -221,7 +241,7 @@ class EnvConfig:
         Controller.parse(self.controller)
         _choice("gait", self.gait, GAITS)
         _choice("engine", self.engine, ENGINE_CHOICES)
-        _choice("u_frame", self.u_frame, U_FRAMES)
+        _policy_u(self.u_frame, self.u_base)
         if not isinstance(self.base, str) or not self.base:
             raise DpcError(
                 f"base={self.base!r}: give a base's name (a1, go1, go2, b1, b1-z1) or the path "
@@ -280,6 +300,17 @@ def _flat(overrides: dict) -> dict:
             raise DpcError(f"{twice} given both alone and in {key}; give each once.")
         out.update(fields)
     return out
+
+
+def _policy_u(u_frame: Any, u_base: Any) -> None:
+    """`DpcError` unless the frame and base of the policy's u are known and fit together."""
+    _choice("u_frame", u_frame, U_FRAMES)
+    _choice("u_base", u_base, U_BASES)
+    if u_base == "observer" and u_frame != "yaw":
+        raise DpcError(
+            "u_base='observer' adds the policy's u to u_obs, a yaw-frame estimate: set "
+            "u_frame='yaw' (the default) with it."
+        )
 
 
 def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:

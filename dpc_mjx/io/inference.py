@@ -16,6 +16,10 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
     u = u_scale * a: [f_a (N), tau_a (N m)], per component, about the COM, in the frame
         action_scaling.frame: 'yaw' (heading-aligned; `u(obs, yaw)` turns it to the world
         frame, `u(obs)` leaves it in the yaw frame) or 'world'
+    u = u_obs + u_scale * a where action_scaling.base is 'observer' (yaw frame; the policy is
+        a residual of the observer's estimate). The env adds the estimate of every 4 ms tick to
+        the policy's u of the last 20 ms step: between policy steps, pass the observation with
+        the tick's u_obs (its last 6 entries), or add the tick's estimate to `residual(obs)`
 
 Every size and the layout come from the sidecar: s_body = obs[start:stop] with
 `observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
@@ -155,6 +159,7 @@ class NumpyPolicy:
             inputs = list(pol.get("inputs", ["s_body", "z"]))  # older sidecars: [s_body, z]
             n_obs = _U_OBS_SIZE if "u_obs" in inputs else 0
             frame = str(scaling.get("frame", "world"))  # older sidecars: world
+            base = str(scaling.get("base", "zero"))  # older sidecars: zero
             s_body = _s_body(meta, obs_size - latent - n_obs)
             enc = encoders.get(arm)
             if enc is not None:
@@ -176,16 +181,17 @@ class NumpyPolicy:
             )
         self.meta, self.arm, self.input_size = meta, arm, input_size
         self.latent_size, self.action_size = latent, action_size
-        self.inputs, self.frame = inputs, frame
+        self.inputs, self.frame, self.base = inputs, frame, base
         self.s_body = s_body  # of the observation
         n_body = s_body.stop - s_body.start
         known = inputs in (["s_body", "z"], ["s_body", "z", "u_obs"]) and frame in ("yaw", "world")
+        known = known and (base == "zero" or (base == "observer" and frame == "yaw"))
         if not known or n_body + latent + n_obs != obs_size or s_body.stop > input_size:
             raise ValueError(
                 f"{d / SIDECAR}: s_body = obs[{s_body.start}:{s_body.stop}], latent_size "
-                f"{latent}, policy.inputs {inputs} and action_scaling.frame {frame!r} do not fit "
-                f"policy.observation_size {obs_size} and the encoder's input size {input_size}; "
-                "re-export the artefacts."
+                f"{latent}, policy.inputs {inputs} and action_scaling.frame {frame!r} (base "
+                f"{base!r}) do not fit policy.observation_size {obs_size} and the encoder's input "
+                f"size {input_size}; re-export the artefacts."
             )
         if len(u_scale) != action_size:
             raise ValueError(
@@ -222,7 +228,7 @@ class NumpyPolicy:
     def _obs(self, obs) -> np.ndarray:
         x = np.asarray(obs, np.float64)
         sizes = [self.input_size + _U_OBS_SIZE]
-        if "u_obs" not in self.inputs:
+        if "u_obs" not in self.inputs and self.base == "zero":
             sizes.append(self.input_size)
         if x.ndim not in (1, 2) or x.shape[-1] not in sizes:
             raise ValueError(
@@ -258,16 +264,24 @@ class NumpyPolicy:
         mean, std = self._pi_norm
         return np.tanh(_forward(self._pi, (pi_in - mean) / std)[..., : self.action_size])
 
-    def u(self, obs, yaw=None) -> np.ndarray:
-        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM. Without `yaw`, in the
-        policy's frame (`frame`), what the ONNX graph gives; with the heading `yaw` (rad; () or
-        (B,)), in the world frame: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau]
-        (a world-frame policy's u as it is)."""
+    def residual(self, obs) -> np.ndarray:
+        """The policy's own u_scale * a (..., 6) in its frame: u itself where `base` is 'zero',
+        what is added to the observer's estimate where it is 'observer'."""
         if self.action_size != 6:
             raise ValueError(
                 f"u needs a 6-D action [f_a, tau_a], this policy has {self.action_size}."
             )
-        u = self.action(obs) * self.scale
+        return self.action(obs) * self.scale
+
+    def u(self, obs, yaw=None) -> np.ndarray:
+        """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM: `residual(obs)`, plus
+        the observation's u_obs where `base` is 'observer'. Without `yaw`, in the policy's frame
+        (`frame`), what the ONNX graph gives; with the heading `yaw` (rad; () or (B,)), in the
+        world frame: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau] (a world-frame
+        policy's u as it is)."""
+        u = self.residual(obs)
+        if self.base == "observer":  # obs holds u_obs (`_obs` checked its size)
+            u = u + self._obs(obs)[..., self.input_size : self.input_size + _U_OBS_SIZE]
         if self.frame == "world" or yaw is None:
             return u
         c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))

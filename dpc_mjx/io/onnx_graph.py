@@ -10,7 +10,8 @@ for the stacks that run ONNX (onnxruntime, TensorRT, C++ and ROS 2 nodes). It co
 
     z = tanh(E((obs[:, :input_size] - mean_E) / std_E))                latent (batch, latent_size)
     x = concat of policy.inputs: s_body = obs[:, s_body], z, u_obs = obs[:, input_size:+6]
-    u = u_scale * tanh(pi((x - mean_pi) / std_pi)[:, :action_size])
+    u = u_scale * tanh(pi((x - mean_pi) / std_pi)[:, :action_size])   (+ u_obs where
+        action_scaling.base is 'observer')
 
 E and pi are Gemm (x @ kernel + bias) layers with Relu between, the flax/brax MLPs. Every size,
 the layout and the scaling come from the sidecar (checked by `load`), the weights and the
@@ -58,6 +59,7 @@ class _Layers:
     action_size: int
     scale: np.ndarray  # (action_size,) N for f_a, N·m for tau_a per unit action
     frame: str  # of u: 'yaw' or 'world'
+    base: str  # what u_scale * a is added to: 'zero' or 'observer' (u_obs, yaw frame)
 
 
 def import_onnx() -> Any:
@@ -119,6 +121,7 @@ def _layers(art: Artefacts, arm: str, path: pathlib.Path) -> _Layers:
         action_size=d.action_size,
         scale=np.asarray(scaling["u_scale"], np.float32),
         frame=frame,
+        base=str(scaling.get("base", "zero")),  # checked by `sidecar_checks.check`
     )
 
 
@@ -182,7 +185,11 @@ def _nodes(g: _Graph, net: _Layers, obs: str, u: str) -> None:
     x = g.op("Concat", *(blocks[k]() for k in net.inputs), axis=1)
     logits = g.mlp(g.standardise(x, net.policy_norm, "policy_norm"), net.policy, "policy")
     action = g.op("Tanh", g.columns(logits, 0, net.action_size))
-    g.op("Mul", action, g.const("u_scale", net.scale), out=u)
+    if net.base == "zero":
+        g.op("Mul", action, g.const("u_scale", net.scale), out=u)
+    else:  # 'observer': u = u_obs + u_scale * a
+        residual = g.op("Mul", action, g.const("u_scale", net.scale))
+        g.op("Add", blocks["u_obs"](), residual, out=u)
 
 
 def onnx_model(export_dir: str | pathlib.Path, arm: str, artefacts: Artefacts | None = None) -> Any:
@@ -232,6 +239,7 @@ def _props(meta: dict, arm: str, net: _Layers) -> dict[str, str]:
     return {
         "arm": arm,
         "frame": net.frame,
+        "base": net.base,
         "u_scale": json.dumps(net.scale.tolist()),
         "u": json.dumps(list(_U_NAMES)),
         "input_size": str(net.input_size + U_OBS_SIZE),

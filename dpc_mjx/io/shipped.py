@@ -26,8 +26,16 @@ SHIPPED_PAPER = SHIPPED.with_name("regular-paper")
 # engine): docs/results.md, "Other bases: the reaching task"
 SHIPPED_BASES = {"a1": SHIPPED, "go2": SHIPPED.with_name("go2"), "b1": SHIPPED.with_name("b1")}
 # The env options that belong to the policy rather than the task (they follow an export to any
-# task), with the values of exports written before they existed
-_POLICY_ENV_BEFORE = {"u_frame": "world", "sensor_noise": 0.0, "sensor_delay": 0}
+# task: the frame and base of its u, the observer a base 'observer' adds to, the sensor model),
+# with the values of exports written before they existed
+_POLICY_ENV_BEFORE = {
+    "u_frame": "world",
+    "u_base": "zero",
+    "observer_gain": 20.0,
+    "observer_aligned": False,
+    "sensor_noise": 0.0,
+    "sensor_delay": 0,
+}
 _CHOSEN_PER_USE = ("controller", "engine")  # env options an export's env_config never imposes
 
 
@@ -40,8 +48,9 @@ def shipped_for(base: str | None) -> pathlib.Path:
 def env_overrides(artefacts: Artefacts, task: str | None = None) -> dict:
     """The env options an export was trained with (its sidecar's env_config), to evaluate and
     transfer under the same disturbances; the controller and the engine are chosen per use. On
-    another `task` than the export's, only the policy's frame and the sensor model carry over
-    (the task brings its own disturbances). An export written before `EnvConfig.u_frame` and the
+    another `task` than the export's, only what belongs to the policy carries over (the frame
+    and base of its u, the observer, the sensor model: `_POLICY_ENV_BEFORE`'s keys; the task
+    brings its own disturbances). An export written before `EnvConfig.u_frame` and the
     sensor model existed acted in the world frame and was trained with exact sensors."""
     saved = {**_POLICY_ENV_BEFORE, **(artefacts.meta.get("env_config") or {})}
     saved = tuples({k: v for k, v in saved.items() if k not in _CHOSEN_PER_USE})

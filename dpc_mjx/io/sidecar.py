@@ -19,7 +19,9 @@ Keys (format_version 1; `export` writes them all):
     decoder         {file, sha256, latent_size, out_size, sees_body, target_layout}
     encoders        {arm: {file, input_size, input_layout, arm_spec, sha256}}
     action_scaling  {u_scale (action_size,): N for f_a, N·m for tau_a; frame: 'yaw' or 'world'
-                    (env_config.u_frame; absent: world); u: in words}
+                    (env_config.u_frame; absent: world); base: 'zero' or 'observer'
+                    (env_config.u_base; absent: zero), with 'observer' also observer {gain,
+                    aligned, sensor_delay}: u = u_obs + u_scale * a; u: in words}
     onnx            {opset, input, output, ...}: the graph `dpc-mjx onnx` writes of an arm
                     (`onnx_graph.py`); absent in sidecars written before it: `ONNX`
     env_config, sac_config, extra   as given to `export`, or null
@@ -59,6 +61,22 @@ _REQUIRED = (
 
 
 # --------------------------------------------------------------------------- building
+
+
+def action_scaling(env_config: EnvConfig) -> dict:
+    """The sidecar's `action_scaling`: u_scale, frame, base (`EnvConfig.u_base`; with
+    'observer' also the observer the policy's u is added to) and u in words."""
+    frame, base = env_config.u_frame, env_config.u_base
+    entry = {"u_scale": list(env_config.u_scale), "frame": frame, "base": base}
+    words = f"u_scale * a (per component), {frame} frame, about the base's COM"
+    if base == "observer":
+        words = f"u_obs + {words} (u_obs: the observation's last 6 entries)"
+        entry["observer"] = {
+            "gain": env_config.observer_gain,  # rad/s, all axes or (force, torque)
+            "aligned": env_config.observer_aligned,
+            "sensor_delay": env_config.sensor_delay,  # 4 ms ticks
+        }
+    return entry | {"u": f"[f_a (N), tau_a (N m)] = {words}"}
 
 
 def observation_meta() -> dict:
@@ -133,12 +151,7 @@ def build(
             "target_layout": list(DECODER_TARGET),  # next step, rad/s, trunk frame
         },
         "encoders": encoders,
-        "action_scaling": {
-            "u_scale": list(scaling.u_scale),
-            "frame": scaling.u_frame,
-            "u": f"[f_a (N), tau_a (N m)] = u_scale * a (per component), {scaling.u_frame} "
-            "frame, about the base's COM",
-        },
+        "action_scaling": action_scaling(scaling),
         "onnx": {
             **ONNX,
             "shapes": "obs float32 (batch, encoders.<arm>.input_size + 6): the raw env "

@@ -12,7 +12,7 @@ import pathlib
 from typing import Any
 
 from dpc_mjx.adapter.networks import DRP_SIZE, AdapterConfig
-from dpc_mjx.envs.config import EnvConfig
+from dpc_mjx.envs.config import U_BASES, EnvConfig
 from dpc_mjx.errors import DpcError
 from dpc_mjx.io.sidecar import DECODER_TARGET, REEXPORT, observation_meta, policy_layout
 from dpc_mjx.policy.policy import PAPER_INPUTS, POLICY_INPUTS, observation_size
@@ -99,6 +99,7 @@ def check(meta: dict, path: pathlib.Path) -> Declared:
                 f"the encoder trained for this arm or {REEXPORT}."
             )
     _check_scaling(meta, path, action_size)
+    _check_base(meta, path)
     return Declared(
         path, meta, config, s_body, hidden, action_size, obs_size, out_size, inputs, policy_inputs
     )
@@ -190,6 +191,21 @@ def _check_scaling(meta: dict, path: pathlib.Path, action_size: int) -> None:
         ) from e
     bounds_names = "env_config.max_force, env_config.max_torque (per axis x, y, z)"
     _same(path, "action_scaling.u_scale", u_scale, expected, bounds_names)
+
+
+def _check_base(meta: dict, path: pathlib.Path) -> None:
+    """action_scaling.base (absent: 'zero'): one of `U_BASES`, 'observer' only with the yaw
+    frame, and env_config.u_base where the env config is recorded."""
+    scaling = meta["action_scaling"]
+    base, frame = scaling.get("base", "zero"), scaling.get("frame", "world")
+    if base not in U_BASES or (base == "observer" and frame != "yaw"):
+        raise DpcError(
+            f"{path}: action_scaling.base must be one of {list(U_BASES)} ('observer' with "
+            f"frame 'yaw'), got {_json(base)} with frame {_json(frame)}; {REEXPORT}."
+        )
+    env = meta.get("env_config")
+    if isinstance(env, dict):
+        _same(path, "action_scaling.base", base, env.get("u_base", "zero"), "env_config.u_base")
 
 
 def _same(path: pathlib.Path, field: str, value: Any, expected: Any, source: str) -> None:

@@ -12,7 +12,9 @@ actor may start from that regression, a teacher-student warm start: the teacher 
 Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) (MSE; u_oracle in
 the policy's frame, `EnvConfig.u_frame`: turned into the yaw frame by the row's heading), and its
 exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
-samples (`Dataset.u_oracle`, collected with MBC); the observation statistics start from the same
+samples (`Dataset.u_oracle`, collected with MBC; with `EnvConfig.u_base` 'observer' the target is
+u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale); the
+observation statistics start from the same
 samples. The last `val_fraction` of the samples are held out (`Dataset.split`): the epoch with
 the lowest held-out loss is kept (`fitting.fit`: at most `epochs`, stopping after `patience`
 without improvement), so components of u that the observation does not predict stay near their
@@ -54,6 +56,7 @@ def regress_actor(
     u_scale,
     *,
     u_frame: str = "yaw",
+    u_base: str = "zero",
     epochs: int = 30,
     patience: int = 5,
     batch_size: int = 256,
@@ -63,8 +66,9 @@ def regress_actor(
     seed: int = 0,
 ) -> tuple[_Carry, dict]:
     """`carry` with its actor and observation statistics fitted to the oracle's u on `data`
-    (in `u_frame`, the env's `EnvConfig.u_frame`), and a report {'r2': per u component on
-    held-out samples, 'val_mse', 'samples'}."""
+    (in `u_frame`, the env's `EnvConfig.u_frame`; with `u_base` 'observer' the residual
+    u_oracle - u_obs, `EnvConfig.u_base`), and a report {'r2': per u component on held-out
+    samples, 'val_mse', 'samples'}."""
     _check_trainer(trainer, adapter_config)
     u_scale = np.asarray(u_scale, np.float32)
 
@@ -73,8 +77,7 @@ def regress_actor(
         obs = policy_observation(
             adapter_config, encoder, jp.asarray(part.observation), trainer.policy_inputs
         )
-        target = np.clip(part.u_oracle_in(u_frame) / u_scale, -U_CLIP, U_CLIP)
-        return obs, jp.asarray(target)
+        return obs, jp.asarray(regression_target(part, u_scale, u_frame, u_base))
 
     train, val = (arrays(part) for part in data.split(val_fraction))
     normalizer = running_statistics.update(carry.training.normalizer, train[0])
@@ -105,6 +108,16 @@ def regress_actor(
         normalizer=normalizer,
     )
     return carry.replace(training=training), report
+
+
+def regression_target(data: Dataset, u_scale, u_frame: str, u_base: str) -> np.ndarray:
+    """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
+    -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
+    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`)."""
+    u = data.u_oracle_in(u_frame)
+    if u_base == "observer":  # the residual of the observer's estimate
+        u = u - data.u_obs_in(u_frame)
+    return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)
 
 
 def _check_trainer(trainer: _Trainer, adapter_config: AdapterConfig) -> None:

@@ -247,12 +247,14 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                 data,
                 env_config.u_scale,
                 u_frame=env_config.u_frame,
+                u_base=env_config.u_base,
                 seed=config.seed,
             )
             reports.append(report)
+            target = "u_oracle - u_obs" if env_config.u_base == "observer" else "the oracle's u"
             r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
             print(
-                f"sac: actor regressed on the oracle's u ({report['samples']:,} samples; "
+                f"sac: actor regressed on {target} ({report['samples']:,} samples; "
                 f"held-out R^2 per u component {r2})",
                 flush=True,
             )

@@ -1,0 +1,90 @@
+"""DPC on the observer (`EnvConfig.u_base='observer'`): the controller adds the policy's u to the
+observer's estimate of each tick, and the policy is fitted to the residual u_oracle - u_obs."""
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+from helpers import ENGINE, FAST_COMPILE
+
+import dpc_mjx
+from dpc_mjx import DpcError
+from dpc_mjx.adapter.data import Dataset
+from dpc_mjx.envs import DEFAULT_TASK
+from dpc_mjx.policy.regression import U_CLIP, regression_target
+from dpc_mjx.rotations import wrench_to_world
+
+_BATCH = 2
+_STEPS = 3
+_U_TOL = 1e-5  # action units: float32 rounding of (u_oracle - u_obs) / u_scale
+# qpos gap to the observer's episode, as a fraction of MBC's (measured 0.013-0.055 over 3 steps)
+_OF_MBC_GAP = 0.2
+
+
+def _states(env, action):
+    """jax.device_get of `_STEPS` env steps from seed 0 under `action` (6,)."""
+    reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)
+    step = jax.jit(jax.vmap(env.step), compiler_options=FAST_COMPILE)
+    state = reset(jax.random.split(jax.random.PRNGKey(0), _BATCH))
+    actions = jp.tile(jp.asarray(action, jp.float32), (_BATCH, 1))
+    out = []
+    for _ in range(_STEPS):
+        state = step(state, actions)
+        out.append(jax.device_get(state))
+    return out
+
+
+def test_dpc_on_the_observer_with_a_zero_action_is_the_observer():
+    """u = the observer's estimate + 0 at every tick: the 'observer' controller's episode, not
+    MBC's. Compiled as the other tests' short programs (`FAST_COMPILE`, LLVM -O0) the two
+    programs' balance QPs end at other iterates within their tolerance, so the states agree to
+    a fraction of MBC's departure, not bit for bit (compiled at the library's level they were
+    equal bit for bit over these steps, sensors on)."""
+    kw = dict(arm="regular", engine=ENGINE, push_force=(0.0, 0.0))
+    observer = _states(dpc_mjx.make(DEFAULT_TASK, controller="observer", **kw), np.ones(6))
+    mbc = _states(dpc_mjx.make(DEFAULT_TASK, controller="mbc", **kw), np.zeros(6))
+    on_observer = dpc_mjx.make(DEFAULT_TASK, controller="dpc", u_base="observer", **kw)
+    assert on_observer.config.adds_observer_estimate
+    residual = _states(on_observer, np.zeros(6))
+    for a, b, c in zip(observer, residual, mbc, strict=True):
+        gap = np.abs(a.pipeline_state.qpos - b.pipeline_state.qpos).max()
+        mbc_gap = np.abs(a.pipeline_state.qpos - c.pipeline_state.qpos).max()
+        assert gap < _OF_MBC_GAP * mbc_gap, (gap, mbc_gap)
+
+
+def test_only_dpc_adds_the_estimate_and_bad_bases_are_refused():
+    make = dpc_mjx.envs.get_config
+    assert not make(DEFAULT_TASK, controller="dpc").adds_observer_estimate  # the paper's
+    assert not make(DEFAULT_TASK, controller="mbc", u_base="observer").adds_observer_estimate
+    with pytest.raises(DpcError, match="u_base.*'zero'.*'observer'"):
+        make(DEFAULT_TASK, u_base="obs")
+    with pytest.raises(DpcError, match="u_base='observer'.*u_frame='yaw'"):
+        make(DEFAULT_TASK, u_base="observer", u_frame="world")
+
+
+def test_the_residual_target_is_the_oracles_u_minus_the_estimate_in_either_frame():
+    rng = np.random.default_rng(0)
+    n = 32
+    yaw = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
+    u_oracle = rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # world frame
+    u_obs = rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # yaw frame, as observed
+    data = Dataset(
+        s_body=np.zeros((n, 11), np.float32),
+        s_arm=np.zeros((n, 0), np.float32),
+        p_arm=np.zeros((n, 0), np.float32),
+        s_drp_next=np.zeros((n, 2), np.float32),
+        u_oracle=u_oracle,
+        u_obs=u_obs,
+        yaw=yaw,
+    )
+    scale = np.full(6, 40.0, np.float32)
+    world = regression_target(data, scale, "world", "observer")
+    expected = (u_oracle - np.asarray(wrench_to_world(u_obs, yaw))) / scale
+    np.testing.assert_allclose(world, np.clip(expected, -U_CLIP, U_CLIP), atol=_U_TOL)
+    yaw_frame = regression_target(data, scale, "yaw", "observer")
+    expected = (data.u_oracle_in("yaw") - u_obs) / scale
+    np.testing.assert_allclose(yaw_frame, np.clip(expected, -U_CLIP, U_CLIP), atol=_U_TOL)
+    paper = regression_target(data, scale, "yaw", "zero")
+    expected = np.clip(data.u_oracle_in("yaw") / scale, -U_CLIP, U_CLIP)
+    np.testing.assert_allclose(paper, expected, atol=0)
+    assert np.any(np.abs(world - paper) > 0.01)  # the estimate made a difference
