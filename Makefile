@@ -40,9 +40,9 @@ demo: $(STAMP)
 # Two workers, one test file each at a time (module fixtures share their compiles), the files in
 # the order tests/conftest.py gives them (longest first; xdist would otherwise reorder them by
 # test count and leave the long few-test files to the end); the JAX compilation cache in
-# .cache/jax (tests/conftest.py) serves repeated compiles, and XLA's older fusion emitters
-# (set by `import dpc_mjx` on jaxlib 0.9.2 when XLA_FLAGS is unset: dpc_mjx/xla_flags.py)
-# compile a third faster.
+# .cache/jax (tests/conftest.py) serves repeated compiles, and XLA's older fusion emitters and
+# LLVM -O1 (set by `import dpc_mjx` on jaxlib 0.9.2 when XLA_FLAGS is unset:
+# dpc_mjx/xla_flags.py) compile about half as long.
 PYTEST_ARGS := -q -n 2 --dist loadfile --no-loadscope-reorder
 PYTEST := $(BIN)/python -m pytest $(PYTEST_ARGS)
 

@@ -9,7 +9,7 @@ import jax
 
 # `import dpc_mjx` before jax's first array (importing jax starts no backend): it sets XLA_FLAGS,
 # where unset, to the pinned jaxlib's flags (`dpc_mjx.xla_flags`: XLA:CPU's older fusion
-# emitters, a third less compile), and the tests' subprocesses inherit them.
+# emitters and LLVM -O1, about half the compile), and the tests' subprocesses inherit them.
 import dpc_mjx  # noqa: F401
 
 _CACHE = pathlib.Path(__file__).resolve().parents[1] / ".cache" / "jax"

@@ -297,7 +297,7 @@ class DpcEnv(Env):
             u = self.controller_u(d, u_policy)
             targets = self.arm_targets(dist, d.time, d)
             add = self.config.adds_observer_estimate
-            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise, add)
+            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise, add_estimate=add)
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
             xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))

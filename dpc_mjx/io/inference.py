@@ -254,7 +254,10 @@ class NumpyPolicy:
 
     def action(self, obs) -> np.ndarray:
         """Deterministic action a (..., action_size) in [-1, 1]: the actor's mode."""
-        x = self._obs(obs)
+        return self._action(self._obs(obs))
+
+    def _action(self, x: np.ndarray) -> np.ndarray:
+        """`action` of an observation `_obs` has checked."""
         blocks = {
             "s_body": x[..., self.s_body],
             "z": self._latent(x),
@@ -267,11 +270,14 @@ class NumpyPolicy:
     def residual(self, obs) -> np.ndarray:
         """The policy's own u_scale * a (..., 6) in its frame: u itself where `base` is 'zero',
         what is added to the observer's estimate where it is 'observer'."""
+        return self._residual(self._obs(obs))
+
+    def _residual(self, x: np.ndarray) -> np.ndarray:
         if self.action_size != 6:
             raise ValueError(
                 f"u needs a 6-D action [f_a, tau_a], this policy has {self.action_size}."
             )
-        return self.action(obs) * self.scale
+        return self._action(x) * self.scale
 
     def u(self, obs, yaw=None) -> np.ndarray:
         """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM: `residual(obs)`, plus
@@ -279,9 +285,10 @@ class NumpyPolicy:
         (`frame`), what the ONNX graph gives; with the heading `yaw` (rad; () or (B,)), in the
         world frame: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau] (a world-frame
         policy's u as it is)."""
-        u = self.residual(obs)
-        if self.base == "observer":  # obs holds u_obs (`_obs` checked its size)
-            u = u + self._obs(obs)[..., self.input_size : self.input_size + _U_OBS_SIZE]
+        x = self._obs(obs)
+        u = self._residual(x)
+        if self.base == "observer":  # x holds u_obs (`_obs` checked its size)
+            u = u + x[..., self.input_size : self.input_size + _U_OBS_SIZE]
         if self.frame == "world" or yaw is None:
             return u
         c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))
