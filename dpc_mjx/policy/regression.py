@@ -70,7 +70,6 @@ def regress_actor(
     u_oracle - u_obs, `EnvConfig.u_base`), and a report {'r2': per u component on held-out
     samples, 'val_mse', 'samples'}."""
     _check_trainer(trainer, adapter_config)
-    u_scale = np.asarray(u_scale, np.float32)
 
     def arrays(part: Dataset) -> tuple[jax.Array, jax.Array]:
         """(obs (N, observation_size) the policy's, target (N, 6) in action units)."""
