@@ -7,6 +7,7 @@ acting through u = [f_a, tau_a].
     config.py      `SacConfig`: the hyperparameters (brax's SAC's, and those of our loop)
     trainer.py     `make_trainer`: the jitted pieces, brax's SAC in our epoch, the evaluation
     state.py       `Carry`: what an epoch hands to the next (learning state, buffer, best policy)
+    replay.py      `RingSamplingQueue`: brax's uniform replay queue, written in place as a ring
     train.py       `train`, `restore_policy`: our host loop (log, checkpoint, resume, best policy)
     log.py         the CSV log, one row per epoch
     checkpoint.py  the full training state on disk, for resuming

@@ -3,7 +3,7 @@
 The paper trains the high-level estimator with SAC (§III-C). The algorithm is brax's
 (`brax.training.agents.sac`): its actor and twin critics (built in `sac.networks`), its losses
 (clipped double-Q targets, entropy temperature tuned towards -action_size/2), its uniform replay
-buffer and `acting.actor_step`; `sgd_step` updates temperature, critics, actor and the
+buffer (written in place as a ring, `sac.replay`) and `acting.actor_step`; `sgd_step` updates temperature, critics, actor and the
 Polyak-averaged target critics as brax's does. Ours: the epoch (`epoch_steps` env steps in one
 jitted `lax.scan`, each actor step followed by `grad_updates_per_step` gradient steps once the
 buffer holds `min_replay_size` transitions), the critic warm-up (`actor_warmup_steps`), the
@@ -28,7 +28,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jp
 import optax
-from brax.training import acting, replay_buffers
+from brax.training import acting
 from brax.training.acme import running_statistics
 from brax.training.agents.sac import losses as sac_losses
 from brax.training.agents.sac import networks as sac_networks
@@ -41,6 +41,7 @@ from dpc_mjx.policy.policy import PAPER_INPUTS
 from dpc_mjx.sac.config import SacConfig
 from dpc_mjx.sac.env import PrivilegedCriticWrapper
 from dpc_mjx.sac.networks import make_networks
+from dpc_mjx.sac.replay import RingSamplingQueue
 from dpc_mjx.sac.state import NO_SCORE, BestPolicy, Carry, TrainingState
 
 
@@ -90,7 +91,7 @@ class _Parts:
     policy_opt: optax.GradientTransformation
     q_opt: optax.GradientTransformation
     alpha_opt: optax.GradientTransformation
-    buffer: replay_buffers.UniformSamplingQueue
+    buffer: RingSamplingQueue
 
 
 def _parts(env, config: SacConfig, mesh, policy_obs_size: int) -> _Parts:
@@ -111,7 +112,7 @@ def _parts(env, config: SacConfig, mesh, policy_obs_size: int) -> _Parts:
     q_opt = optax.adam(config.learning_rate)
     alpha_opt = optax.adam(3e-4)  # brax's choice
     dummy_obs = jp.zeros((obs_size,))
-    buffer = replay_buffers.UniformSamplingQueue(
+    buffer = RingSamplingQueue(
         max_replay_size=config.max_replay_size,
         dummy_data_sample=Transition(
             observation=dummy_obs,
@@ -297,26 +298,29 @@ def _training_step_fn(p: _Parts) -> Callable:
         ts = ts.replace(normalizer=normalizer, env_steps=ts.env_steps + config.num_envs)
         return ts, env_state, buffer.insert(buf, tr)
 
-    def learn(ts, buf, key):
-        buf, transitions = buffer.sample(buf)
+    def learn(ts, transitions, key):  # transitions: (grad_updates_per_step * batch_size, ...)
         transitions = jax.tree.map(
             lambda x: x.reshape((config.grad_updates_per_step, -1) + x.shape[1:]), transitions
         )
         (ts, _), losses = jax.lax.scan(sgd_step, (ts, key), transitions)
-        return ts, buf, jax.tree.map(jp.mean, losses)
+        return ts, jax.tree.map(jp.mean, losses)
 
-    def skip(ts, buf, key):
-        del key
+    def skip(ts, transitions, key):
+        del transitions, key
         zero = jp.zeros(())
         losses = {"critic_loss": zero, "actor_loss": zero, "alpha_loss": zero}
-        return ts, buf, losses | {"alpha": jp.exp(ts.log_alpha)}
+        return ts, losses | {"alpha": jp.exp(ts.log_alpha)}
 
     def training_step(carry, _):
         c, env_state = carry
         key, k_exp, k_sgd = jax.random.split(c.key, 3)
         ts, env_state, buf = experience(c.training, env_state, c.buffer, k_exp)
         ready = buffer.size(buf) >= max(config.min_replay_size, config.batch_size)
-        ts, buf, losses = jax.lax.cond(ready, learn, skip, ts, buf, k_sgd)
+        # Sampled on every step, outside the cond (a cond holding the 57 MB buffer copies it);
+        # the buffer's key moves on only when the sample is used, as if sampled inside.
+        sampled, transitions = buffer.sample(buf)
+        buf = buf.replace(key=jp.where(ready, sampled.key, buf.key))
+        ts, losses = jax.lax.cond(ready, learn, skip, ts, transitions, k_sgd)
         c = c.replace(training=ts, buffer=buf, key=key)
         stats = _episode_stats(env_state) | losses | {"learning": ready.astype(jp.float32)}
         return (c, env_state), stats
