@@ -3,12 +3,13 @@
 The paper trains the high-level estimator with SAC (§III-C). The algorithm is brax's
 (`brax.training.agents.sac`): its actor and twin critics (built in `sac.networks`), its losses
 (clipped double-Q targets, entropy temperature tuned towards -action_size/2), its uniform replay
-buffer (written in place as a ring, `sac.replay`) and `acting.actor_step`; `sgd_step` updates temperature, critics, actor and the
-Polyak-averaged target critics as brax's does. Ours: the epoch (`epoch_steps` env steps in one
-jitted `lax.scan`, each actor step followed by `grad_updates_per_step` gradient steps once the
-buffer holds `min_replay_size` transitions), the critic warm-up (`actor_warmup_steps`), the
-initial temperature, and `evaluate`: deterministic episodes (actions times a `gate`, 0 giving the
-same episodes with u = 0) on the library's one rollout core, `envs.rollout.scan_steps`.
+buffer (written in place as a ring, `sac.replay`) and `acting.actor_step`; `sgd_step` updates
+temperature, critics, actor and the Polyak-averaged target critics as brax's does. Ours: the
+epoch (`epoch_steps` env steps in one jitted `lax.scan`, each actor step followed by
+`grad_updates_per_step` gradient steps once the buffer holds `min_replay_size` transitions), the
+critic warm-up (`actor_warmup_steps`), the initial temperature, and `evaluate`: deterministic
+episodes (actions times a `gate`, 0 giving the same episodes with u = 0) on the library's one
+rollout core, `envs.rollout.scan_steps`.
 
 On several devices of its process (`devices.mesh(local=True)`) the env batch is sharded over them:
 each device steps its envs (`devices.constrain` on the env state after every step), the networks,
@@ -316,8 +317,9 @@ def _training_step_fn(p: _Parts) -> Callable:
         key, k_exp, k_sgd = jax.random.split(c.key, 3)
         ts, env_state, buf = experience(c.training, env_state, c.buffer, k_exp)
         ready = buffer.size(buf) >= max(config.min_replay_size, config.batch_size)
-        # Sampled on every step, outside the cond (a cond holding the 57 MB buffer copies it);
-        # the buffer's key moves on only when the sample is used, as if sampled inside.
+        # Sampled on every step, outside the cond, so that the cond's operands do not hold the
+        # 57 MB buffer (XLA may copy a cond's operands); the buffer's key moves on only when the
+        # sample is used, so the samples are those drawn inside the cond before.
         sampled, transitions = buffer.sample(buf)
         buf = buf.replace(key=jp.where(ready, sampled.key, buf.key))
         ts, losses = jax.lax.cond(ready, learn, skip, ts, transitions, k_sgd)
