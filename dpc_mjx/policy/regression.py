@@ -14,11 +14,11 @@ the policy's frame, `EnvConfig.u_frame`: turned into the yaw frame by the row's 
 exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
 samples (`Dataset.u_oracle`, collected with MBC; with `EnvConfig.u_base` 'observer' the target is
 u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale); the
-observation statistics start from the same
-samples. The last `val_fraction` of the samples are held out (`Dataset.split`): the epoch with
-the lowest held-out loss is kept (`fitting.fit`: at most `epochs`, stopping after `patience`
-without improvement), so components of u that the observation does not predict stay near their
-mean instead of fitting noise, and the report gives the held-out R^2 per component.
+observation statistics start from the same samples. The last `val_fraction` of the samples are
+held out (`Dataset.split`): the epoch with the lowest held-out loss is kept (`fitting.fit`: at
+most `epochs`, stopping after `patience` without improvement), so components of u that the
+observation does not predict stay near their mean instead of fitting noise, and the report gives
+the held-out R^2 per component.
 """
 
 from __future__ import annotations
