@@ -147,6 +147,22 @@ class Dataset:
             seconds=sum(p.seconds for p in parts),
         )
 
+    @classmethod
+    def interleave(cls, parts: list[Dataset]) -> Dataset:
+        """The rows of collections from several arms as one: each part's rows keep their order
+        and are spread evenly over the whole (row i of a part of n rows at (i + 0.5) / n, ties
+        in part order), so that `split` holds out the latest rows of every part; env ids are
+        offset so that part k's envs follow part k-1's."""
+        offset, shifted, position = 0, [], []
+        for part in parts:
+            if part.env_id is None:
+                raise DpcError("interleave needs the env_id of every part (from `collect`).")
+            shifted.append(dataclasses.replace(part, env_id=part.env_id + offset))
+            offset += int(part.env_id.max()) + 1
+            position.append((np.arange(len(part)) + 0.5) / len(part))
+        order = np.argsort(np.concatenate(position), kind="stable")
+        return cls.concatenate(shifted).take(order)
+
     def split(self, val_fraction: float) -> tuple[Dataset, Dataset]:
         """(train, validation): the last `val_fraction` of the rows are held out (later in time,
         so validation episodes are mostly not seen in training)."""

@@ -21,6 +21,8 @@ from dpc_mjx import sac
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.registry import DEFAULT_TASK, get_config
 from dpc_mjx.errors import DpcError
+from dpc_mjx.robots.family import ArmFamily
+from dpc_mjx.robots.variants import resolve
 from dpc_mjx.serialization import jsonable, read_json, tuples, write_json
 from dpc_mjx.writer import barrier, is_writer
 
@@ -101,6 +103,9 @@ class RunConfig:
 
     task: str = DEFAULT_TASK
     arm: str = "regular"  # a variant name (`dpc_mjx.robots.VARIANTS`)
+    # Arms drawn around `arm` whose data join the adapter's and the regression's
+    # (`robots.family`; count 0: the run's arm alone, the paper's protocol)
+    arm_family: ArmFamily = ArmFamily()
     env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
     samples: int = 100_000  # random-motion transitions for the adapter
     data_envs: int = 64
@@ -160,6 +165,7 @@ class RunConfig:
                 raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
         self.adapter.validate()
         self.sac.validate()
+        self._validate_family()
         if self.actor_init not in ACTOR_INITS:
             raise DpcError(f"actor_init={self.actor_init!r} is not one of {list(ACTOR_INITS)}.")
         sac.inputs_named(self.policy_input)
@@ -174,6 +180,24 @@ class RunConfig:
                 "sac.num_timesteps (e.g. 1000000) or actor_init='oracle_regression'."
             )
 
+    def _validate_family(self) -> None:
+        self.arm_family.validate()
+        if not self.arm_family.count:
+            return
+        if self.sac.num_timesteps or self.dagger_rounds:
+            raise DpcError(
+                "arm_family trains the adapter and the oracle regression over the family; a SAC "
+                "stage or DAgger would run on the run's arm alone. Set sac.num_timesteps=0 and "
+                "dagger_rounds=0, or arm_family.count=0."
+            )
+        arms = resolve(self.arm).arms
+        if len(arms) != 1:
+            raise DpcError(
+                f"arm_family varies one parametric arm; {self.arm!r} carries {len(arms)}. "
+                "Train on regular, longer, heavier or pusher, or set arm_family.count=0."
+            )
+        self.arm_family.members(arms[0], self.seed)  # a URDF arm is refused here
+
     def to_json(self) -> dict:
         return jsonable(dataclasses.asdict(self))
 
@@ -183,6 +207,7 @@ class RunConfig:
             d = dict(d)
             d["adapter"] = adapter_lib.AdapterConfig(**tuples(d["adapter"]))
             d["sac"] = sac.SacConfig(**tuples(d["sac"]))
+            d["arm_family"] = ArmFamily(**tuples(d.get("arm_family", {})))  # older: none
             d["eval_controllers"] = tuple(d["eval_controllers"])
             d["env_overrides"] = tuples(d["env_overrides"])
             return cls(**d)
@@ -193,7 +218,7 @@ class RunConfig:
         """A copy with overrides by dotted name: `arm='longer'`, `sac.num_envs=32`,
         `adapter.epochs=20`, `env.push_force=(0, 60)`; the seeds of the adapter and SAC
         follow `seed` and are not options of their own."""
-        top, sub = {}, {"adapter": {}, "sac": {}, "env": {}}
+        top, sub = {}, {"adapter": {}, "sac": {}, "env": {}, "arm_family": {}}
         for key, value in dotted.items():
             if key in _SUB_SEEDS:
                 raise DpcError(
@@ -209,7 +234,7 @@ class RunConfig:
                 raise DpcError(
                     f"Unknown run option {key!r}; use a RunConfig field "
                     f"({[f.name for f in dataclasses.fields(self)]}) or adapter.<field>, "
-                    "sac.<field>, env.<field>."
+                    "sac.<field>, env.<field>, arm_family.<field>."
                 )
         out = dataclasses.replace(self, **top)
         try:
@@ -217,6 +242,7 @@ class RunConfig:
                 out,
                 adapter=dataclasses.replace(out.adapter, **sub["adapter"]),
                 sac=dataclasses.replace(out.sac, **sub["sac"]),
+                arm_family=dataclasses.replace(out.arm_family, **tuples(sub["arm_family"])),
                 env_overrides={**out.env_overrides, **sub["env"]},
             )
         except TypeError as e:

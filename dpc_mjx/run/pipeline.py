@@ -45,6 +45,7 @@ from dpc_mjx.run import plots
 from dpc_mjx.run.config import RunConfig, read_run_config, start_run
 from dpc_mjx.run.eval import CONTROLLERS, CellResult, evaluate_table
 from dpc_mjx.run.tensorboard import NO_EVENTS, RunEvents, run_events
+from dpc_mjx.run.training_arms import collect_training_data
 from dpc_mjx.serialization import write_json
 from dpc_mjx.writer import barrier, is_writer
 
@@ -113,11 +114,7 @@ def train_adapter(
         loaded = adapter_checkpoint.load(folder)
         events.adapter(loaded.history)
         return loaded
-    env = make(config.task, arm=config.arm, controller=Controller.MBC, **config.env_overrides)
-    print(f"adapter: collecting {config.samples:,} samples ({config.arm}, MBC)", flush=True)
-    data = adapter_lib.collect(
-        env, config.samples, n_envs=config.data_envs, seed=config.seed, progress=progress
-    )
+    data = collect_training_data(config, progress)  # the run's arm and its family's
     cfg = config.adapter  # its seed is the run's (`RunConfig.seed`)
     trained = adapter_lib.train(data, cfg, progress=progress)
     if is_writer():
@@ -291,6 +288,8 @@ def export(
             "sac_env_steps": result.history[-1]["env_steps"] if result.history else 0,
             "actor_init": config.actor_init,
             "policy_input": config.policy_input,
+            # the arms the adapter and the policy learnt from besides `arms` (robots.family)
+            **({"arm_family": config.arm_family} if config.arm_family.count else {}),
         },
     )
     barrier("export written")  # the other processes read it next (the evaluation)
