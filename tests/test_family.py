@@ -88,17 +88,25 @@ def test_interleaved_arms_keep_their_order_and_each_gives_its_latest_rows_to_val
 
 def test_the_collection_splits_the_budget_and_the_envs_over_the_family(monkeypatch):
     config = RunConfig().replace(**{"arm_family.count": 2, "samples": 1001, "data_envs": 64})
-    calls = []
+    calls = []  # ("make", arm) and ("collect", env, samples, n_envs, seed), in call order
+
+    def make(task, arm, controller, **overrides):
+        calls.append(("make", arm))
+        return arm  # the env stands for its arm
 
     def collect(env, samples, n_envs, seed, progress):
-        calls.append((env, samples, n_envs, seed))
+        calls.append(("collect", env, samples, n_envs, seed))
         return _part(samples, n_envs, float(len(calls)))
 
-    monkeypatch.setattr(training_arms, "make", lambda task, arm, controller, **kw: arm)
+    monkeypatch.setattr(training_arms, "make", make)
     monkeypatch.setattr(training_arms.adapter_lib, "collect", collect)
     data = training_arms.collect_training_data(config, progress=False)
-    members = config.arm_family.members(ArmSpec(), config.seed)
-    assert [c[0] for c in calls] == ["regular", *members]
-    assert [c[1:] for c in calls] == [(335, 22, 0), (333, 22, 10_000), (333, 22, 20_000)]
-    counts = [int((data.s_arm[:, 0] == tag).sum()) for tag in (1.0, 2.0, 3.0)]
+    arms = ["regular", *config.arm_family.members(ArmSpec(), config.seed)]
+    assert calls[:3] == [("make", arm) for arm in arms]  # every env built before collecting
+    assert calls[3:] == [
+        ("collect", arms[0], 335, 22, 0),
+        ("collect", arms[1], 333, 22, 10_000),
+        ("collect", arms[2], 333, 22, 20_000),
+    ]
+    counts = [int((data.s_arm[:, 0] == tag).sum()) for tag in (4.0, 5.0, 6.0)]
     assert counts == [335, 333, 333] and data.env_id.max() == 3 * 22 - 1

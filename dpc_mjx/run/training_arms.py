@@ -40,9 +40,12 @@ def collect_training_data(config: RunConfig, progress: bool = True) -> adapter_l
     n_envs = math.ceil(config.data_envs / len(arms))
     shares = [config.samples // len(arms)] * len(arms)
     shares[0] += config.samples - sum(shares)
+    # every env built first: an arm the base cannot hold up is refused before any collection
+    envs = [
+        make(config.task, arm=a, controller=Controller.MBC, **config.env_overrides) for _, a in arms
+    ]
     parts = []
-    for k, ((label, arm), samples) in enumerate(zip(arms, shares, strict=True)):
-        env = make(config.task, arm=arm, controller=Controller.MBC, **config.env_overrides)
+    for k, ((label, arm), env, samples) in enumerate(zip(arms, envs, shares, strict=True)):
         what = label if isinstance(arm, str) else f"{label}: {describe(arm)}"
         print(f"adapter: collecting {samples:,} samples ({what}, MBC)", flush=True)
         part = adapter_lib.collect(
