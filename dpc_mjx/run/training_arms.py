@@ -25,12 +25,13 @@ FAMILY_SEED_STRIDE = 10_000  # apart from DAgger's seed + k and the evaluation's
 
 
 def training_arms(config: RunConfig) -> list[tuple[str, str | Arm]]:
-    """(label, arm): the run's arm first, then the family's members ('family-1', ...)."""
+    """(label, arm): the run's arm first (its name), then the family's members ('family-1:
+    upper arm ... kg', `family.describe`)."""
     arms: list[tuple[str, str | Arm]] = [(config.arm, config.arm)]
     if config.arm_family.count:
         (base,) = resolve(config.arm).arms  # one parametric arm (`RunConfig.validate`)
         members = config.arm_family.members(base, config.seed)
-        arms += [(f"family-{k}", arm) for k, arm in enumerate(members, 1)]
+        arms += [(f"family-{k}: {describe(arm)}", arm) for k, arm in enumerate(members, 1)]
     return arms
 
 
@@ -45,15 +46,8 @@ def collect_training_data(config: RunConfig, progress: bool = True) -> adapter_l
         make(config.task, arm=a, controller=Controller.MBC, **config.env_overrides) for _, a in arms
     ]
     parts = []
-    for k, ((label, arm), env, samples) in enumerate(zip(arms, envs, shares, strict=True)):
-        what = label if isinstance(arm, str) else f"{label}: {describe(arm)}"
-        print(f"adapter: collecting {samples:,} samples ({what}, MBC)", flush=True)
-        part = adapter_lib.collect(
-            env,
-            samples,
-            n_envs=n_envs,
-            seed=config.seed + FAMILY_SEED_STRIDE * k,
-            progress=progress,
-        )
-        parts.append(part)
+    for k, ((label, _), env, samples) in enumerate(zip(arms, envs, shares, strict=True)):
+        print(f"adapter: collecting {samples:,} samples ({label}, MBC)", flush=True)
+        seed = config.seed + FAMILY_SEED_STRIDE * k
+        parts.append(adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress))
     return parts[0] if len(parts) == 1 else adapter_lib.Dataset.interleave(parts)
