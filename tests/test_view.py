@@ -1,9 +1,14 @@
 """`dpc-mjx view` (`dpc_mjx/run/view.py`) without a window: the real-time loop driven by a fake
 viewer that pushes a body and presses a key, on a tiny fake env (no env compile); the display
-check; the key map. The real env under the loop's step is the slow test at the end."""
+check; the key map. The real env under the loop's step, and MuJoCo's real viewer pulled by a
+synthetic mouse on a virtual display, are the slow tests at the end."""
 
 import contextlib
+import shutil
+import subprocess
+import sys
 import types
+from pathlib import Path
 
 import jax
 import jax.numpy as jp
@@ -139,6 +144,23 @@ def test_the_loop_feeds_the_mouse_push_and_the_keys_to_the_env():
     np.testing.assert_allclose(live.data.qpos[0], 2 * DT * 0.1, rtol=1e-5)  # mirrored, moved
     assert viewer.syncs == 4
     np.testing.assert_allclose(clock.sleeps, [0.015] * 4, atol=1e-9)  # real time: 4 x 20 ms
+
+
+def test_a_pull_is_reported_when_it_begins_and_when_it_is_let_go():
+    lines = []
+    live = view.LiveEnv(FakeEnv(), log=lines.append)
+    command, none = np.array([0.5, 0.0, 0.0], np.float32), np.zeros_like(PUSH)
+    for xfrc in (none, PUSH, PUSH, PUSH, none, none):
+        live.step(command, xfrc)
+    # 3 steps of 20 ms pulled; the link rode on the trunk, moving at v_x 0.5 m/s: 0.03 m
+    assert lines == [
+        "view: mouse pull on body 'link'",
+        "view: pull on 'link' let go after 0.06 s, peak 6 N and 0.5 N·m; the body moved 0.03 m",
+    ]
+    live.step(command, PUSH)
+    live.reset()  # a new episode ends a pull unreported
+    live.step(command, none)
+    assert len(lines) == 3 and lines[2] == "view: mouse pull on body 'link'"
 
 
 def test_the_loop_warns_when_it_falls_behind_and_does_not_rush():
@@ -384,3 +406,19 @@ def test_view_runs_the_shipped_dpc_live(monkeypatch):
     assert cam.type == mujoco.mjtCamera.mjCAMERA_TRACKING
     assert cam.trackbodyid == windows[0].m.body("trunk").id
     assert windows[0].m.nbody > 10  # the A1 with its arm
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not all(shutil.which(tool) for tool in ("Xvfb", "xdotool")),
+    reason="needs the X tools Xvfb and xdotool (apt-get install xvfb xdotool)",
+)
+def test_a_mouse_pull_in_the_real_viewer_moves_the_robot():
+    """MuJoCo's own passive viewer on a virtual display, a synthetic double-click on the trunk and
+    a Ctrl + right drag (experiments/view_mouse.py): the pull reaches the env and moves it."""
+    root = Path(__file__).resolve().parents[1]
+    script = root / "experiments" / "view_mouse.py"
+    run = [sys.executable, str(script), "--controller", "mbc", "--display", ":96"]
+    out = subprocess.run(run, check=False, cwd=root, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stdout[-4000:]
+    assert "| trunk |" in out.stdout

@@ -25,7 +25,10 @@ applies (pushes, payload, object weights) before every physics tick of the step
 (`pushed`, after the task's `task_physics`), held for the step's 20 ms. The controllers learn of
 it as they would of any disturbance: the oracle through the arm's mount wrench, the observer
 through the body's momentum, DPC through the arm's state. The env's own random pushes are off
-unless asked for (`env={'push_force': (0, 30)}`): the mouse is the disturbance.
+unless asked for (`env={'push_force': (0, 30)}`): the mouse is the disturbance. A line says
+when a pull begins and, when it is let go, how long it lasted, how hard it pulled and how far
+it moved the body (`MousePulls`). `experiments/view_mouse.py` drives a real viewer with a
+synthetic mouse on a virtual display (Xvfb) and checks that a pull moves the robot.
 
 Keys (`KeyCommand`, the viewer's key_callback; keys the passive viewer does not use): Up/Down
 forward velocity, Left/Right lateral velocity, Home/End yaw rate, Space the zero command, Delete
@@ -250,6 +253,44 @@ def make_live_step(env, policy: Policy):
     return jax.jit(step)
 
 
+class MousePulls:
+    """Logs each mouse pull the viewer applies: the body when it begins; when it is let go, its
+    duration (s of simulated time), its peak force (N) and torque (N·m), and how far the body's
+    origin moved meanwhile (m, world). `update` is called before every step."""
+
+    def __init__(self, model: mujoco.MjModel, log: Callable[[str], None] = print):
+        self.model, self.log = model, log
+        self.body: int | None = None  # the body pulled now (None: no pull)
+        self._start, self._t0, self._force, self._torque = np.zeros(3), 0.0, 0.0, 0.0
+
+    def update(self, data: mujoco.MjData, xfrc: np.ndarray) -> None:
+        """`xfrc` (nbody, 6) world [f (N), tau (N·m)]: what the coming step applies; `data`:
+        the state before it (after the last pulled step when a pull has just ended)."""
+        strength = np.abs(xfrc).max(axis=1)  # (nbody,)
+        if self.body is None and strength.max() > 0:
+            self.body = int(strength.argmax())
+            self._start, self._t0 = data.xpos[self.body].copy(), float(data.time)
+            self._force = self._torque = 0.0
+            self.log(f"view: mouse pull on body '{self.model.body(self.body).name}'")
+        if self.body is None:
+            return
+        if strength[self.body] > 0:
+            self._force = max(self._force, float(np.linalg.norm(xfrc[self.body, :3])))
+            self._torque = max(self._torque, float(np.linalg.norm(xfrc[self.body, 3:])))
+            return
+        moved = float(np.linalg.norm(data.xpos[self.body] - self._start))
+        self.log(
+            f"view: pull on '{self.model.body(self.body).name}' let go after "
+            f"{float(data.time) - self._t0:.2f} s, peak {self._force:.0f} N and "
+            f"{self._torque:.1f} N·m; the body moved {moved:.2f} m"
+        )
+        self.body = None
+
+    def forget(self) -> None:
+        """A new episode: a pull in progress ends unreported (the body was moved by the reset)."""
+        self.body = None
+
+
 class LiveEnv:
     """One env stepped live (`make_live_step`), shown through `data`, an `MjData` of `model`
     (a copy of the env's model, so the viewer's settings never reach the physics)."""
@@ -261,12 +302,14 @@ class LiveEnv:
         self._reset_fn = jax.jit(env.reset)
         self._step_fn = make_live_step(env, policy)
         self._key = jax.random.PRNGKey(seed)
+        self.pulls = MousePulls(self.model, log)
         self.episode = 0
         self.state = self.reset()
 
     def reset(self) -> State:
         self.state = self._reset_fn(jax.random.fold_in(self._key, self.episode))
         self.episode += 1
+        self.pulls.forget()
         self.mirror()
         return self.state
 
@@ -275,6 +318,7 @@ class LiveEnv:
             self.log(f"view: new episode {self.episode}")
             self.reset()
             return
+        self.pulls.update(self.data, xfrc)
         self.state = self._step_fn(self.state, jp.asarray(command), jp.asarray(xfrc), self._key)
         self.mirror()
         if float(self.state.done):
