@@ -60,8 +60,11 @@ class ViewProcess:
             print(f"  | {line.rstrip()}", flush=True)
 
     def wait_for(self, pattern: str, timeout: float) -> re.Match | None:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and self.proc.poll() is None:
+        """The first line matching `pattern`, looked for every 0.5 s for about `timeout` s;
+        None if none came or the view ended."""
+        for _ in range(round(timeout / 0.5)):
+            if self.proc.poll() is not None:
+                break
             for line in self.lines:
                 if match := re.search(pattern, line):
                     return match

@@ -88,3 +88,67 @@ def test_the_residual_target_is_the_oracles_u_minus_the_estimate_in_either_frame
     expected = np.clip(data.u_oracle_in("yaw") / scale, -U_CLIP, U_CLIP)
     np.testing.assert_allclose(paper, expected, atol=0)
     assert np.any(np.abs(world - paper) > 0.01)  # the estimate made a difference
+
+
+def _trajectories() -> Dataset:
+    """Two envs stepped together for 6 steps (rows: time, then env); env 1's episode ends after
+    its 3rd row (its 4th transition was dropped: its next state was a reset), so its last two
+    rows start a new episode. Roll and pitch rates follow each env's own sequence."""
+    drp = {0: [0.1 * k for k in range(7)], 1: [1.0, 1.1, 1.2, 1.3, 5.0, 5.1, 5.2]}
+    rows = [(k, env) for k in range(6) for env in (0, 1) if (k, env) != (3, 1)]
+    s_body = np.zeros((len(rows), 11), np.float32)
+    s_body[:, 2] = [drp[env][k] for k, env in rows]
+    s_drp_next = np.zeros((len(rows), 2), np.float32)
+    s_drp_next[:, 0] = [drp[env][k + 1] for k, env in rows]
+    s_body[:, 3] = s_drp_next[:, 1] = 0.5  # the pitch rate, equal everywhere
+    u = np.zeros((len(rows), 6), np.float32)
+    u[:, 0] = [float(k >= 1) for k, _ in rows]  # N: a step in the oracle's f_x at k = 1
+    return Dataset(
+        s_body=s_body,
+        s_arm=np.zeros((len(rows), 0), np.float32),
+        p_arm=np.zeros((len(rows), 0), np.float32),
+        s_drp_next=s_drp_next,
+        env_id=np.array([env for _, env in rows], np.int32),
+        u_oracle=u,
+        u_obs=np.zeros_like(u),
+        yaw=np.zeros(len(rows), np.float32),
+    )
+
+
+def test_previous_rows_follow_each_env_within_an_episode():
+    data = _trajectories()
+    # rows: (0,0) (0,1) (1,0) (1,1) (2,0) (2,1) (3,0) (4,0) (4,1) (5,0) (5,1)
+    expected = [-1, -1, 0, 1, 2, 3, 4, 6, -1, 7, 8]
+    np.testing.assert_array_equal(data.previous_rows(), expected)
+    with pytest.raises(DpcError, match="env_id"):
+        Dataset(data.s_body, data.s_arm, data.p_arm, data.s_drp_next).previous_rows()
+
+
+def test_the_fast_residual_leaves_out_its_exponential_average_along_each_episode():
+    data, scale, alpha = _trajectories(), np.full(6, 10.0, np.float32), 0.02 / (0.08 + 0.02)
+    # tau 0.08 s, rows 0.02 s apart: alpha 0.2
+    fast = regression_target(data, scale, "yaw", "observer", slow_s=0.08, step_s=0.02)
+    whole = regression_target(data, scale, "yaw", "observer")
+    # env 0: f_x steps 0 -> 1 N at k = 1; the average a_k = 1 - (1 - alpha)^k, the target 1 - a_k
+    env0 = data.env_id == 0
+    k = np.arange(6)
+    expected = np.where(k >= 1, (1 - alpha) ** k, 0.0) / 10.0
+    np.testing.assert_allclose(fast[env0, 0], expected, atol=1e-7)
+    # env 1's second episode starts afresh (its average is its first row's f_x, 1 N, so its
+    # target is 0; carried over from the first episode's 0.36 it would be 0.064 and 0.051)
+    np.testing.assert_allclose(fast[data.env_id == 1, 0], [0, 0.08, 0.064, 0, 0], atol=1e-7)
+    np.testing.assert_array_equal(fast[:, 1:], 0.0)
+    np.testing.assert_array_equal(whole[:, 0], data.u_oracle[:, 0] / 10.0)  # slow part kept
+    with pytest.raises(DpcError, match="u_base='observer'"):
+        regression_target(data, scale, "yaw", "zero", slow_s=0.5)
+
+
+def test_a_fast_residual_run_needs_the_observer_base():
+    from dpc_mjx.run.config import RunConfig  # noqa: PLC0415
+
+    with pytest.raises(DpcError, match="env.u_base=observer"):
+        RunConfig().replace(residual_slow_s=0.5)
+    with pytest.raises(DpcError, match="seconds in"):
+        RunConfig().replace(residual_slow_s=-1.0, **{"env.u_base": "observer"})
+    config = RunConfig().replace(residual_slow_s=0.5, **{"env.u_base": "observer"})
+    assert RunConfig.from_json(config.to_json()).residual_slow_s == 0.5

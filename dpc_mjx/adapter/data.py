@@ -163,6 +163,23 @@ class Dataset:
         order = np.argsort(np.concatenate(position), kind="stable")
         return cls.concatenate(shifted).take(order)
 
+    def previous_rows(self) -> np.ndarray:
+        """(N,) int: the row of the same env one env step earlier in the same episode, -1 where
+        there is none (an episode's first kept row, a row after a dropped transition, a row of
+        another collection). Read from the rows themselves: row j follows row i when both have
+        one env_id, i comes first, and j's roll and pitch rates are exactly i's `s_drp_next`
+        (the same observation: `collect` records both from it)."""
+        if self.env_id is None:
+            raise DpcError("previous_rows needs the env_id column (a dataset from `collect`).")
+        previous = np.full(len(self), -1, np.int64)
+        last: dict[int, int] = {}  # env id -> its latest row so far
+        for j, env in enumerate(self.env_id.tolist()):
+            i = last.get(env)
+            if i is not None and np.array_equal(self.s_drp_next[i], self.s_body[j, DRP]):
+                previous[j] = i
+            last[env] = j
+        return previous
+
     def split(self, val_fraction: float) -> tuple[Dataset, Dataset]:
         """(train, validation): the last `val_fraction` of the rows are held out (later in time,
         so validation episodes are mostly not seen in training)."""

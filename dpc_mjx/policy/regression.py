@@ -13,7 +13,9 @@ Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) 
 the policy's frame, `EnvConfig.u_frame`: turned into the yaw frame by the row's heading), and its
 exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
 samples (`Dataset.u_oracle`, collected with MBC; with `EnvConfig.u_base` 'observer' the target is
-u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale); the
+u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale, and
+with `slow_s` > 0 only its fast part: minus its exponential average over `slow_s` seconds along
+each episode, `regression_target`); the
 observation statistics start from the same samples. The last `val_fraction` of the samples are
 held out (`Dataset.split`): the epoch with the lowest held-out loss is kept (`fitting.fit`: at
 most `epochs`, stopping after `patience` without improvement), so components of u that the
@@ -57,6 +59,8 @@ def regress_actor(
     *,
     u_frame: str = "yaw",
     u_base: str = "zero",
+    slow_s: float = 0.0,
+    step_s: float = 0.02,
     epochs: int = 30,
     patience: int = 5,
     batch_size: int = 256,
@@ -67,18 +71,23 @@ def regress_actor(
 ) -> tuple[_Carry, dict]:
     """`carry` with its actor and observation statistics fitted to the oracle's u on `data`
     (in `u_frame`, the env's `EnvConfig.u_frame`; with `u_base` 'observer' the residual
-    u_oracle - u_obs, `EnvConfig.u_base`), and a report {'r2': per u component on held-out
-    samples, 'val_mse', 'samples'}."""
+    u_oracle - u_obs, `EnvConfig.u_base`, its fast part with `slow_s` > 0; `step_s` s between
+    a row and the next of its episode, the env step), and a report {'r2': per u component on
+    held-out samples, 'val_mse', 'samples'}."""
     _check_trainer(trainer, adapter_config)
+    # (N, 6) over the whole data (the slow part runs along episodes), then split as the rows
+    target = jp.asarray(regression_target(data, u_scale, u_frame, u_base, slow_s, step_s))
 
-    def arrays(part: Dataset) -> tuple[jax.Array, jax.Array]:
+    def arrays(part: Dataset, rows: slice) -> tuple[jax.Array, jax.Array]:
         """(obs (N, observation_size) the policy's, target (N, 6) in action units)."""
         obs = policy_observation(
             adapter_config, encoder, jp.asarray(part.observation), trainer.policy_inputs
         )
-        return obs, jp.asarray(regression_target(part, u_scale, u_frame, u_base))
+        return obs, target[rows]
 
-    train, val = (arrays(part) for part in data.split(val_fraction))
+    train_part, val_part = data.split(val_fraction)
+    train = arrays(train_part, slice(0, len(train_part)))
+    val = arrays(val_part, slice(len(train_part), None))
     normalizer = running_statistics.update(carry.training.normalizer, train[0])
     predict = _predictor(trainer.networks.policy_network, normalizer)
 
@@ -109,14 +118,41 @@ def regress_actor(
     return carry.replace(training=training), report
 
 
-def regression_target(data: Dataset, u_scale, u_frame: str, u_base: str) -> np.ndarray:
+def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the target's form)
+    data: Dataset,
+    u_scale,
+    u_frame: str,
+    u_base: str,
+    slow_s: float = 0.0,
+    step_s: float = 0.02,
+) -> np.ndarray:
     """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
     -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
-    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`)."""
+    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`). With `slow_s` > 0 (u_base
+    'observer' only) the residual d = u_oracle - u_obs loses its slow part, its exponential
+    average along each episode (`slow_part`): u = d - slow(d), the correction of the observer's
+    lag that a policy held over one env step can give, while the observer keeps what changes
+    slower (the arm's weight, and its bias from the legs' model error, which acts as integral
+    action on the balance QP: control/observer.py)."""
     u = data.u_oracle_in(u_frame)
     if u_base == "observer":  # the residual of the observer's estimate
         u = u - data.u_obs_in(u_frame)
+        if slow_s > 0:
+            u = u - slow_part(u, data.previous_rows(), step_s / (slow_s + step_s))
+    elif slow_s > 0:
+        raise DpcError("slow_s splits the observer's residual: it needs u_base='observer'.")
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)
+
+
+def slow_part(values: np.ndarray, previous: np.ndarray, alpha: float) -> np.ndarray:
+    """(N, k) the exponential average of `values` (N, k) along each episode, causal:
+    a_j = a_i + alpha (v_j - a_i) with i = previous[j] (the row one step earlier, `previous` from
+    `Dataset.previous_rows`, each before its row), a_j = v_j at an episode's first row (-1).
+    alpha = dt / (tau + dt): time constant tau for rows dt apart."""
+    out = np.empty_like(values)
+    for j, i in enumerate(previous.tolist()):
+        out[j] = values[j] if i < 0 else out[i] + alpha * (values[j] - out[i])
+    return out
 
 
 def _check_trainer(trainer: _Trainer, adapter_config: AdapterConfig) -> None:

@@ -130,6 +130,11 @@ class RunConfig:
     # actor, labelled with the oracle's u, added to the data before regressing again
     dagger_rounds: int = 0
     dagger_samples: int = 20_000
+    # With env.u_base='observer': s; the regression target leaves out the part of
+    # u_oracle - u_obs slower than this (its exponential average along each episode), so that the
+    # observer keeps the slow part, its integral action on the legs' model error included; 0:
+    # the whole residual (`policy.regression.regression_target`)
+    residual_slow_s: float = 0.0
     # the run's one seed; `adapter.seed` and `sac.seed` follow it (the module's docstring)
     seed: int = 0
 
@@ -166,6 +171,7 @@ class RunConfig:
         self.adapter.validate()
         self.sac.validate()
         self._validate_family()
+        self._validate_residual()
         if self.actor_init not in ACTOR_INITS:
             raise DpcError(f"actor_init={self.actor_init!r} is not one of {list(ACTOR_INITS)}.")
         sac.inputs_named(self.policy_input)
@@ -178,6 +184,23 @@ class RunConfig:
             raise DpcError(
                 "actor_init='random' with sac.num_timesteps=0 trains nothing: set "
                 "sac.num_timesteps (e.g. 1000000) or actor_init='oracle_regression'."
+            )
+
+    def _validate_residual(self) -> None:
+        slow = self.residual_slow_s
+        if isinstance(slow, bool) or not isinstance(slow, (int, float)) or not 0 <= slow < 60:
+            raise DpcError(
+                f"RunConfig.residual_slow_s must be a number of seconds in [0, 60), got {slow!r}."
+            )
+        if slow and get_config(self.task, **self.env_overrides).u_base != "observer":
+            raise DpcError(
+                "residual_slow_s splits the residual u_oracle - u_obs: it needs "
+                "env.u_base=observer (`--set env.u_base=observer`), or residual_slow_s=0."
+            )
+        if slow and self.actor_init != "oracle_regression":
+            raise DpcError(
+                "residual_slow_s shapes the oracle regression's target: it needs "
+                "actor_init='oracle_regression'."
             )
 
     def _validate_family(self) -> None:

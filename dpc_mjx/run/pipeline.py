@@ -245,13 +245,16 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                 env_config.u_scale,
                 u_frame=env_config.u_frame,
                 u_base=env_config.u_base,
+                slow_s=config.residual_slow_s,
+                step_s=env_config.policy_dt,
                 seed=config.seed,
             )
             reports.append(report)
             target = "u_oracle - u_obs" if env_config.u_base == "observer" else "the oracle's u"
+            slow = f" less its {config.residual_slow_s:g} s average" * bool(config.residual_slow_s)
             r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
             print(
-                f"sac: actor regressed on {target} ({report['samples']:,} samples; "
+                f"sac: actor regressed on {target}{slow} ({report['samples']:,} samples; "
                 f"held-out R^2 per u component {r2})",
                 flush=True,
             )
@@ -290,6 +293,7 @@ def export(
             "policy_input": config.policy_input,
             # the arms the adapter and the policy learnt from besides `arms` (robots.family)
             **({"arm_family": config.arm_family} if config.arm_family.count else {}),
+            **({"residual_slow_s": config.residual_slow_s} if config.residual_slow_s else {}),
         },
     )
     barrier("export written")  # the other processes read it next (the evaluation)
