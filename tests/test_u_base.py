@@ -139,6 +139,11 @@ def test_the_fast_residual_leaves_out_its_exponential_average_along_each_episode
     np.testing.assert_allclose(fast[data.env_id == 1, 0], [0, 0.08, 0.064, 0, 0], atol=1e-7)
     np.testing.assert_array_equal(fast[:, 1:], 0.0)
     np.testing.assert_array_equal(whole[:, 0], data.u_oracle[:, 0] / 10.0)  # slow part kept
+    # (force, torque): 0 keeps that part whole
+    torque_only = regression_target(data, scale, "yaw", "observer", slow_s=(0.0, 0.08))
+    np.testing.assert_array_equal(torque_only, whole)  # the step is in f_x
+    force_only = regression_target(data, scale, "yaw", "observer", slow_s=(0.08, 0.0))
+    np.testing.assert_array_equal(force_only, fast)
     with pytest.raises(DpcError, match="u_base='observer'"):
         regression_target(data, scale, "yaw", "zero", slow_s=0.5)
 
@@ -150,5 +155,10 @@ def test_a_fast_residual_run_needs_the_observer_base():
         RunConfig().replace(residual_slow_s=0.5)
     with pytest.raises(DpcError, match="seconds in"):
         RunConfig().replace(residual_slow_s=-1.0, **{"env.u_base": "observer"})
-    config = RunConfig().replace(residual_slow_s=0.5, **{"env.u_base": "observer"})
-    assert RunConfig.from_json(config.to_json()).residual_slow_s == 0.5
+    with pytest.raises(DpcError, match="one number or"):
+        RunConfig().replace(residual_slow_s=(1.0, 2.0, 3.0), **{"env.u_base": "observer"})
+    assert not RunConfig().replace(residual_slow_s=(0, 0)).splits_residual
+    for slow in (0.5, (0.0, 1.0)):
+        config = RunConfig().replace(residual_slow_s=slow, **{"env.u_base": "observer"})
+        assert config.splits_residual
+        assert RunConfig.from_json(config.to_json()).residual_slow_s == slow

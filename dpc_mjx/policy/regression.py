@@ -59,7 +59,7 @@ def regress_actor(
     *,
     u_frame: str = "yaw",
     u_base: str = "zero",
-    slow_s: float = 0.0,
+    slow_s: float | tuple[float, float] = 0.0,
     step_s: float = 0.02,
     epochs: int = 30,
     patience: int = 5,
@@ -123,32 +123,35 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
     u_scale,
     u_frame: str,
     u_base: str,
-    slow_s: float = 0.0,
+    slow_s: float | tuple[float, float] = 0.0,
     step_s: float = 0.02,
 ) -> np.ndarray:
     """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
     -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
-    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`). With `slow_s` > 0 (u_base
-    'observer' only) the residual d = u_oracle - u_obs loses its slow part, its exponential
-    average along each episode (`slow_part`): u = d - slow(d), the correction of the observer's
-    lag that a policy held over one env step can give, while the observer keeps what changes
-    slower (the arm's weight, and its bias from the legs' model error, which acts as integral
-    action on the balance QP: control/observer.py)."""
+    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`). With `slow_s` > 0 (s; one
+    number, or (force, torque) where 0 keeps that part whole; u_base 'observer' only) the
+    residual d = u_oracle - u_obs loses its slow part, its exponential average along each
+    episode (`slow_part`): u = d - slow(d), the correction of the observer's lag that a policy
+    held over one env step can give, while the observer keeps what changes slower (the arm's
+    weight, and its bias from the legs' model error, which acts as integral action on the
+    balance QP: control/observer.py)."""
+    taus = np.repeat(np.broadcast_to(np.asarray(slow_s, np.float32), (2,)), 3)  # (6,) s
     u = data.u_oracle_in(u_frame)
     if u_base == "observer":  # the residual of the observer's estimate
         u = u - data.u_obs_in(u_frame)
-        if slow_s > 0:
-            u = u - slow_part(u, data.previous_rows(), step_s / (slow_s + step_s))
-    elif slow_s > 0:
+        if np.any(taus > 0):
+            slow = slow_part(u, data.previous_rows(), step_s / (taus + step_s))
+            u = u - np.where(taus > 0, slow, 0.0)
+    elif np.any(taus > 0):
         raise DpcError("slow_s splits the observer's residual: it needs u_base='observer'.")
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)
 
 
-def slow_part(values: np.ndarray, previous: np.ndarray, alpha: float) -> np.ndarray:
+def slow_part(values: np.ndarray, previous: np.ndarray, alpha) -> np.ndarray:
     """(N, k) the exponential average of `values` (N, k) along each episode, causal:
     a_j = a_i + alpha (v_j - a_i) with i = previous[j] (the row one step earlier, `previous` from
     `Dataset.previous_rows`, each before its row), a_j = v_j at an episode's first row (-1).
-    alpha = dt / (tau + dt): time constant tau for rows dt apart."""
+    alpha = dt / (tau + dt): time constant tau for rows dt apart (a number, or (k,) per column)."""
     out = np.empty_like(values)
     for j, i in enumerate(previous.tolist()):
         out[j] = values[j] if i < 0 else out[i] + alpha * (values[j] - out[i])

@@ -130,11 +130,11 @@ class RunConfig:
     # actor, labelled with the oracle's u, added to the data before regressing again
     dagger_rounds: int = 0
     dagger_samples: int = 20_000
-    # With env.u_base='observer': s; the regression target leaves out the part of
-    # u_oracle - u_obs slower than this (its exponential average along each episode), so that the
-    # observer keeps the slow part, its integral action on the legs' model error included; 0:
-    # the whole residual (`policy.regression.regression_target`)
-    residual_slow_s: float = 0.0
+    # With env.u_base='observer': s, one number or (force, torque); the regression target leaves
+    # out the part of u_oracle - u_obs slower than this (its exponential average along each
+    # episode), so that the observer keeps the slow part, its integral action on the legs' model
+    # error included; 0: the whole residual (`policy.regression.regression_target`)
+    residual_slow_s: float | tuple[float, float] = 0.0
     # the run's one seed; `adapter.seed` and `sac.seed` follow it (the module's docstring)
     seed: int = 0
 
@@ -150,6 +150,13 @@ class RunConfig:
         if self.eval_steps is not None:
             return self.eval_steps
         return get_config(self.task, **self.env_overrides).episode_length
+
+    @property
+    def splits_residual(self) -> bool:
+        """Whether the regression leaves a slow part of the residual to the observer
+        (`residual_slow_s` > 0 for the force or the torque)."""
+        slow = self.residual_slow_s
+        return any(slow) if isinstance(slow, (tuple, list)) else bool(slow)
 
     def validate(self) -> None:
         get_config(self.task, **self.env_overrides)  # task name and overrides
@@ -188,16 +195,19 @@ class RunConfig:
 
     def _validate_residual(self) -> None:
         slow = self.residual_slow_s
-        if isinstance(slow, bool) or not isinstance(slow, (int, float)) or not 0 <= slow < 60:
+        parts = slow if isinstance(slow, (tuple, list)) and len(slow) == 2 else (slow,)
+        if not all(_seconds(v) for v in parts):
             raise DpcError(
-                f"RunConfig.residual_slow_s must be a number of seconds in [0, 60), got {slow!r}."
+                f"RunConfig.residual_slow_s must be seconds in [0, 60), one number or (force, "
+                f"torque), got {slow!r}."
             )
-        if slow and get_config(self.task, **self.env_overrides).u_base != "observer":
+        u_base = get_config(self.task, **self.env_overrides).u_base
+        if self.splits_residual and u_base != "observer":
             raise DpcError(
                 "residual_slow_s splits the residual u_oracle - u_obs: it needs "
                 "env.u_base=observer (`--set env.u_base=observer`), or residual_slow_s=0."
             )
-        if slow and self.actor_init != "oracle_regression":
+        if self.splits_residual and self.actor_init != "oracle_regression":
             raise DpcError(
                 "residual_slow_s shapes the oracle regression's target: it needs "
                 "actor_init='oracle_regression'."
@@ -233,6 +243,7 @@ class RunConfig:
             d["arm_family"] = ArmFamily(**tuples(d.get("arm_family", {})))  # older: none
             d["eval_controllers"] = tuple(d["eval_controllers"])
             d["env_overrides"] = tuples(d["env_overrides"])
+            d |= tuples({k: v for k, v in d.items() if k == "residual_slow_s"})
             return cls(**d)
         except (KeyError, TypeError) as e:
             raise DpcError(f"Not a RunConfig ({e}); start a new run folder.") from e
@@ -278,6 +289,10 @@ def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
     """The `RunConfig` a run folder was started with."""
     path = pathlib.Path(run_dir) / CONFIG_FILE
     return RunConfig.from_json(read_json(path, "run config", hint="is this a run folder?"))
+
+
+def _seconds(v) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and 0 <= v < 60
 
 
 def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None:

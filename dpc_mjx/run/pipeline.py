@@ -251,7 +251,7 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
             )
             reports.append(report)
             target = "u_oracle - u_obs" if env_config.u_base == "observer" else "the oracle's u"
-            slow = f" less its {config.residual_slow_s:g} s average" * bool(config.residual_slow_s)
+            slow = f" less its {config.residual_slow_s} s average" * config.splits_residual
             r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
             print(
                 f"sac: actor regressed on {target}{slow} ({report['samples']:,} samples; "
@@ -293,7 +293,7 @@ def export(
             "policy_input": config.policy_input,
             # the arms the adapter and the policy learnt from besides `arms` (robots.family)
             **({"arm_family": config.arm_family} if config.arm_family.count else {}),
-            **({"residual_slow_s": config.residual_slow_s} if config.residual_slow_s else {}),
+            **({"residual_slow_s": config.residual_slow_s} if config.splits_residual else {}),
         },
     )
     barrier("export written")  # the other processes read it next (the evaluation)
