@@ -251,7 +251,7 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
             )
             reports.append(report)
             target = "u_oracle - u_obs" if env_config.u_base == "observer" else "the oracle's u"
-            slow = f" less its {config.residual_slow_s} s average" * config.splits_residual
+            slow = f" less its slow part ({config.residual_slow_s} s)" * config.splits_residual
             r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
             print(
                 f"sac: actor regressed on {target}{slow} ({report['samples']:,} samples; "
