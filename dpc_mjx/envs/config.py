@@ -249,7 +249,7 @@ class EnvConfig:
             )
         _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
         _int("sensor_delay", self.sensor_delay, 0, 10)
-        _gains("observer_gain", self.observer_gain, 1.0, 200.0)
+        check_number_or_pair("observer_gain", self.observer_gain, 1.0, 200.0)
         _bool("observer_aligned", self.observer_aligned)
         for name in ("max_force", "max_torque"):
             _axes(name, getattr(self, name))
@@ -323,8 +323,8 @@ def _int(name: str, value: Any, low: int, high: float = math.inf) -> None:
         raise DpcError(f"{name} must be an int in [{low}, {high}], got {value!r}.")
 
 
-def _gains(name: str, value: Any, low: float, high: float) -> None:
-    """A number in [low, high], or a (force, torque) pair of them."""
+def check_number_or_pair(name: str, value: Any, low: float, high: float) -> None:
+    """`DpcError` unless `value` is a number in [low, high], or a (force, torque) pair of them."""
     if isinstance(value, tuple) and len(value) != 2:
         raise DpcError(f"{name} must be a number or a (force, torque) pair, got {value!r}.")
     for v in value if isinstance(value, tuple) else (value,):

@@ -19,6 +19,7 @@ from typing import Any
 from dpc_mjx import adapter as adapter_lib
 from dpc_mjx import sac
 from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.config import check_number_or_pair
 from dpc_mjx.envs.registry import DEFAULT_TASK, get_config
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.family import ArmFamily
@@ -156,7 +157,7 @@ class RunConfig:
         """Whether the regression leaves a slow part of the residual to the observer
         (`residual_slow_s` > 0 for the force or the torque)."""
         slow = self.residual_slow_s
-        return any(slow) if isinstance(slow, (tuple, list)) else bool(slow)
+        return any(slow) if isinstance(slow, tuple) else bool(slow)
 
     def validate(self) -> None:
         get_config(self.task, **self.env_overrides)  # task name and overrides
@@ -194,13 +195,7 @@ class RunConfig:
             )
 
     def _validate_residual(self) -> None:
-        slow = self.residual_slow_s
-        parts = slow if isinstance(slow, (tuple, list)) and len(slow) == 2 else (slow,)
-        if not all(_seconds(v) for v in parts):
-            raise DpcError(
-                f"RunConfig.residual_slow_s must be seconds in [0, 60), one number or (force, "
-                f"torque), got {slow!r}."
-            )
+        check_number_or_pair("RunConfig.residual_slow_s (s)", self.residual_slow_s, 0.0, 60.0)
         u_base = get_config(self.task, **self.env_overrides).u_base
         if self.splits_residual and u_base != "observer":
             raise DpcError(
@@ -237,13 +232,11 @@ class RunConfig:
     @classmethod
     def from_json(cls, d: dict) -> RunConfig:
         try:
-            d = dict(d)
+            d = tuples(d)  # JSON's lists back to tuples (eval_controllers, residual_slow_s)
             d["adapter"] = adapter_lib.AdapterConfig(**tuples(d["adapter"]))
             d["sac"] = sac.SacConfig(**tuples(d["sac"]))
             d["arm_family"] = ArmFamily(**tuples(d.get("arm_family", {})))  # older: none
-            d["eval_controllers"] = tuple(d["eval_controllers"])
             d["env_overrides"] = tuples(d["env_overrides"])
-            d |= tuples({k: v for k, v in d.items() if k == "residual_slow_s"})
             return cls(**d)
         except (KeyError, TypeError) as e:
             raise DpcError(f"Not a RunConfig ({e}); start a new run folder.") from e
@@ -270,7 +263,7 @@ class RunConfig:
                     f"({[f.name for f in dataclasses.fields(self)]}) or adapter.<field>, "
                     "sac.<field>, env.<field>, arm_family.<field>."
                 )
-        out = dataclasses.replace(self, **top)
+        out = dataclasses.replace(self, **tuples(top))
         try:
             out = dataclasses.replace(
                 out,
@@ -289,10 +282,6 @@ def read_run_config(run_dir: str | pathlib.Path) -> RunConfig:
     """The `RunConfig` a run folder was started with."""
     path = pathlib.Path(run_dir) / CONFIG_FILE
     return RunConfig.from_json(read_json(path, "run config", hint="is this a run folder?"))
-
-
-def _seconds(v) -> bool:
-    return not isinstance(v, bool) and isinstance(v, (int, float)) and 0 <= v < 60
 
 
 def start_run(config: RunConfig, run_dir: pathlib.Path, *, resume: bool) -> None:
