@@ -232,10 +232,11 @@ class RunConfig:
     @classmethod
     def from_json(cls, d: dict) -> RunConfig:
         try:
-            d = tuples(d)  # JSON's lists back to tuples (eval_controllers, residual_slow_s)
+            d = tuples(d)  # JSON's lists back to tuples (residual_slow_s)
             d["adapter"] = adapter_lib.AdapterConfig(**tuples(d["adapter"]))
             d["sac"] = sac.SacConfig(**tuples(d["sac"]))
             d["arm_family"] = ArmFamily(**tuples(d.get("arm_family", {})))  # older: none
+            d["eval_controllers"] = tuple(d["eval_controllers"])
             d["env_overrides"] = tuples(d["env_overrides"])
             return cls(**d)
         except (KeyError, TypeError) as e:
