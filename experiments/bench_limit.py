@@ -8,16 +8,21 @@ physics steps per second:
 
 - physics only: `mujoco.batch.Batch(env.model, B, nthread).step()` on the reaching env's
   compiled model (`dpc_mjx.make("reaching", arm="regular", controller="mbc")`), from the
-  states of the env's own reset (the same scene, the reset's controls held), `--steps` calls
-  of one step per repeat, each repeat from those states;
+  states of the env's own reset (the same scene, the reset's controls held), a block of
+  `--steps` calls of one step;
 - the full env, native engine (`NativePhysics(threads=nthread)`) and MJX:
   `jax.jit(jax.vmap(env.step))` through the rollout core (`envs.rollout.make_chunk`, 10 env
-  steps per call, MBC), counted as env steps x `env.n_substeps`; the first call (compile +
-  first run, in a process that compiled other batches before) is timed apart. MJX runs on
-  XLA's own threads (as many as the process's cores, whatever `--threads` says), so it is
-  measured once per batch, in the first thread count's group.
+  steps per call, MBC), a block of `--calls` calls from the same reset states, counted as env
+  steps x `env.n_substeps`; the first call (compile + first run, in a process that compiled
+  other batches before) is timed apart. MJX runs on XLA's own threads (as many as the
+  process's cores, whatever `--threads` says), so it is measured once per batch, in the first
+  thread count's group.
 
-"vs physics only" is a row's physics steps/s over the physics-only row of its group.
+The blocks of a group run interleaved, `--rounds` rounds of one block each, so that every
+ratio compares blocks timed seconds apart (this shared machine's speed drifts by 1.5x within
+minutes). Rates are the best round's; "vs physics only" is the median over rounds of a row's
+physics steps/s over the physics-only block of the same round, with the range of those
+per-round ratios beside it.
 
 One core (issue 26's "what must hold"): `taskset -c 0 ... --one-core`. `--one-core` adds
 `--xla_cpu_multi_thread_eigen=false` to XLA_FLAGS (Eigen's kernels single-threaded) and
@@ -41,14 +46,14 @@ from mujoco.batch import Batch
 import dpc_mjx
 from dpc_mjx.envs import rollout
 from dpc_mjx.physics import INPUTS, NativePhysics
-from dpc_mjx.timing import Stopwatch, time_calls
+from dpc_mjx.timing import Stopwatch, run_calls, time_calls
 
 ONE_CORE_FLAG = "--xla_cpu_multi_thread_eigen=false"
 CHUNK = 10  # env steps per jitted call
 TASK, ARM = "reaching", "regular"
 HEADER = (
     "| batch | threads | what | compile + first call (s) | env steps/s | physics steps/s "
-    "| vs physics only |\n|---|---|---|---|---|---|---|"
+    "| vs physics only (median of rounds) | per-round range |\n|---|---|---|---|---|---|---|---|"
 )
 
 
@@ -57,14 +62,14 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--batches", type=int, nargs="+", default=[64, 256])
     p.add_argument("--threads", nargs="+", default=["1", "all"], help="1, N or all (every core)")
     p.add_argument("--engines", nargs="+", default=["native", "mjx"], choices=["native", "mjx"])
-    p.add_argument("--calls", type=int, default=5, help="timed env calls of 10 steps per row")
-    p.add_argument("--steps", type=int, default=200, help="physics-only calls per repeat")
-    p.add_argument("--reps", type=int, default=10, help="physics-only repeats")
+    p.add_argument("--calls", type=int, default=20, help="env calls of 10 steps per round")
+    p.add_argument("--steps", type=int, default=200, help="physics-only calls per round")
+    p.add_argument("--rounds", type=int, default=10, help="rounds, each every row's block once")
     p.add_argument("--one-core", action="store_true", help="XLA single-threaded, one core")
     p.add_argument("--quick", action="store_true", help="batch 8, few repeats: a smoke run")
     args = p.parse_args(argv)
     if args.quick:
-        args.batches, args.calls, args.steps, args.reps = [8], 1, 5, 2
+        args.batches, args.calls, args.steps, args.rounds = [8], 1, 5, 2
     return args
 
 
@@ -95,44 +100,86 @@ def start(engine: str, batch: int) -> tuple:
     return env, carry, key
 
 
-def physics_rate(env, carry, nthread: int, steps: int, reps: int) -> float:
-    """Physics steps/s of `mujoco.batch.Batch(env.model, B, nthread).step()` from the env's
-    reset states (`carry`), `steps` calls per repeat, each repeat from those states again."""
+def physics_block(env, carry, nthread: int, steps: int):
+    """f() -> seconds of `steps` calls of `mujoco.batch.Batch(env.model, B, nthread).step()`,
+    each block from the env's reset states (`carry`) again."""
     d = jax.device_get(carry[0].pipeline_state)
-    batch = len(d.qpos)
-    sims = Batch(env.model, batch, nthread)
+    sims = Batch(env.model, len(d.qpos), nthread)
     fields = {k: sims.bind(k) for k in INPUTS}
-    seconds = 0.0
-    for rep in range(reps + 1):  # repeat 0: a warm-up, not timed
+
+    def block() -> float:
         for k, view in fields.items():
             view[...] = np.reshape(getattr(d, k), view.shape)
         with Stopwatch() as clock:
             for _ in range(steps):
                 sims.step()
-        seconds += clock.seconds if rep else 0.0
-    return batch * steps * reps / seconds
+        return clock.seconds
+
+    block()  # a warm-up, not timed
+    return block
 
 
-def env_rate(env, carry, key, calls: int, nthread: int) -> dict:
-    """{'compile': s, 'sps': env steps/s} of `jit(vmap(env.step))` in `CHUNK`-step chunks
-    (`envs.rollout.make_chunk`, MBC: the action is ignored) from `carry`; the native engine
-    on `nthread` threads."""
+def env_block(env, carry, key, calls: int, nthread: int):
+    """(compile + first call s, f() -> seconds of `calls` calls) of `jit(vmap(env.step))` in
+    `CHUNK`-step chunks (`envs.rollout.make_chunk`, MBC: the action is ignored) from `carry`;
+    the native engine on `nthread` threads. Each block starts from `carry` again, as each
+    physics-only block does from the same reset states."""
     if env.config.engine == "native":
         env.physics = NativePhysics(env.model, threads=nthread)
     run = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, CHUNK)
-    first, per_call, _ = time_calls(lambda c: run(c, key)[0], carry, calls)
-    return {"compile": first, "sps": len(carry[1].ret) * CHUNK / per_call}
+    first = time_calls(lambda c: run(c, key)[0], carry, 1)[0]
+
+    def block() -> float:
+        return run_calls(lambda c: run(c, key)[0], carry, calls)[0]
+
+    return first, block
 
 
-def row(batch, nthread, what, base, compile_s=None, sps=None, n_substeps=1) -> str:
-    """One table row; `sps` None: the physics-only row (`base` physics steps/s)."""
+def interleaved(blocks: dict, rounds: int) -> dict[str, list[float]]:
+    """{name: [seconds of each round]}: each round runs every block once, in turn, so that each
+    row's time is taken beside the others' (this machine's speed drifts within minutes)."""
+    times = {name: [] for name in blocks}
+    for _ in range(rounds):
+        for name, block in blocks.items():
+            times[name].append(block())
+    return times
+
+
+def row(batch, nthread, what, base, compile_s=None, sps=None, n_substeps=1, ratios=None) -> str:
+    """One table row; `sps` None: the physics-only row (`base` physics steps/s, best round);
+    `ratios`: the per-round ratios to the physics-only block of the same round."""
     physics = base if sps is None else sps * n_substeps
     first = "-" if compile_s is None else f"{compile_s:.1f}"
     env_sps = "-" if sps is None else f"{sps:,.0f}"
+    spread = "-" if ratios is None else f"{min(ratios):.2f}-{max(ratios):.2f}"
+    median = 1.0 if ratios is None else float(np.median(ratios))
     return (
         f"| {batch} | {nthread} | {what} | {first} | {env_sps} | {physics:,.0f} "
-        f"| {physics / base:.2f} |"
+        f"| {median:.2f} | {spread} |"
     )
+
+
+def measure_group(args, batch: int, nthread: int, native, with_mjx: bool) -> None:
+    """The rows of one batch and thread count: physics only, then each env, interleaved."""
+    n_sub = native[0].n_substeps
+    blocks = {"physics": physics_block(*native[:2], nthread, args.steps)}
+    envs, compiles = {}, {}
+    if "native" in args.engines:
+        envs["env, native"] = native
+    if with_mjx:  # XLA's threads, whatever nthread says
+        envs["env, mjx (XLA's threads)"] = start("mjx", batch)
+    for what, (env, carry, key) in envs.items():
+        compiles[what], blocks[what] = env_block(env, carry, key, args.calls, nthread)
+    times = interleaved(blocks, args.rounds)
+    base = batch * args.steps / min(times["physics"])  # physics steps/s, best round
+    print(row(batch, nthread, "mujoco.batch physics only", base), flush=True)
+    for what in envs:
+        sps = batch * CHUNK * args.calls / min(times[what])  # env steps/s, best round
+        ratios = [
+            (batch * CHUNK * args.calls * n_sub / t) / (batch * args.steps / p)
+            for t, p in zip(times[what], times["physics"], strict=True)
+        ]
+        print(row(batch, nthread, what, base, compiles[what], sps, n_sub, ratios), flush=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -148,17 +195,7 @@ def main(argv: list[str] | None = None) -> None:
     for batch in args.batches:
         native = start("native", batch)
         for n, nthread in enumerate(thread_counts(args.threads)):
-            base = physics_rate(*native[:2], nthread, args.steps, args.reps)
-            print(row(batch, nthread, "mujoco.batch physics only", base), flush=True)
-            if "native" in args.engines:
-                r = env_rate(*native, args.calls, nthread)
-                what = "env, native"
-                print(row(batch, nthread, what, base, r["compile"], r["sps"], native[0].n_substeps))
-            if "mjx" in args.engines and n == 0:  # XLA's threads, whatever nthread says
-                env = start("mjx", batch)
-                r = env_rate(*env, args.calls, nthread)
-                what = "env, mjx (XLA's threads)"
-                print(row(batch, nthread, what, base, r["compile"], r["sps"], env[0].n_substeps))
+            measure_group(args, batch, nthread, native, "mjx" in args.engines and n == 0)
             sys.stdout.flush()
 
 
