@@ -46,7 +46,7 @@ from mujoco.batch import Batch
 import dpc_mjx
 from dpc_mjx.envs import rollout
 from dpc_mjx.physics import INPUTS, NativePhysics
-from dpc_mjx.timing import Stopwatch, run_calls, time_calls
+from dpc_mjx.timing import Stopwatch, run_calls, timed
 
 ONE_CORE_FLAG = "--xla_cpu_multi_thread_eigen=false"
 CHUNK = 10  # env steps per jitted call
@@ -127,7 +127,7 @@ def env_block(env, carry, key, calls: int, nthread: int):
     if env.config.engine == "native":
         env.physics = NativePhysics(env.model, threads=nthread)
     run = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, CHUNK)
-    first = time_calls(lambda c: run(c, key)[0], carry, 1)[0]
+    _, first = timed(run, carry, key)
 
     def block() -> float:
         return run_calls(lambda c: run(c, key)[0], carry, calls)[0]
