@@ -161,7 +161,6 @@ def row(batch, nthread, what, base, compile_s=None, sps=None, n_substeps=1, rati
 
 def measure_group(args, batch: int, nthread: int, native, with_mjx: bool) -> None:
     """The rows of one batch and thread count: physics only, then each env, interleaved."""
-    n_sub = native[0].n_substeps
     blocks = {"physics": physics_block(*native[:2], nthread, args.steps)}
     envs, compiles = {}, {}
     if "native" in args.engines:
@@ -171,15 +170,16 @@ def measure_group(args, batch: int, nthread: int, native, with_mjx: bool) -> Non
     for what, (env, carry, key) in envs.items():
         compiles[what], blocks[what] = env_block(env, carry, key, args.calls, nthread)
     times = interleaved(blocks, args.rounds)
-    base = batch * args.steps / min(times["physics"])  # physics steps/s, best round
+    physics_steps, env_steps = batch * args.steps, batch * CHUNK * args.calls  # per block
+    base = physics_steps / min(times["physics"])  # physics steps/s, best round
     print(row(batch, nthread, "mujoco.batch physics only", base), flush=True)
-    for what in envs:
-        sps = batch * CHUNK * args.calls / min(times[what])  # env steps/s, best round
+    for what, (env, _, _) in envs.items():
+        sps = env_steps / min(times[what])  # env steps/s, best round
         ratios = [
-            (batch * CHUNK * args.calls * n_sub / t) / (batch * args.steps / p)
+            (env_steps * env.n_substeps / t) / (physics_steps / p)
             for t, p in zip(times[what], times["physics"], strict=True)
         ]
-        print(row(batch, nthread, what, base, compiles[what], sps, n_sub, ratios), flush=True)
+        print(row(batch, nthread, what, base, compiles[what], sps, env.n_substeps, ratios))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> None:
         native = start("native", batch)
         for n, nthread in enumerate(thread_counts(args.threads)):
             measure_group(args, batch, nthread, native, "mjx" in args.engines and n == 0)
-            sys.stdout.flush()
+            sys.stdout.flush()  # the env rows of the group
 
 
 if __name__ == "__main__":
