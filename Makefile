@@ -91,7 +91,7 @@ $(DOCS_STAMP): $(STAMP)
 docs: $(DOCS_STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --clean --site-dir site
 
-# ruff, then the layers of the README's Architecture (import-linter's contract in pyproject.toml)
+# ruff, then the layers of docs/architecture.md ("The layers") (import-linter's contract in pyproject.toml)
 lint: $(STAMP)
 	$(BIN)/ruff check dpc_mjx tests experiments
 	$(BIN)/lint-imports --no-logo --cache-dir .cache/import-linter

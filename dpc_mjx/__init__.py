@@ -3,7 +3,7 @@
 `import dpc_mjx` loads this file, `errors`, `_version` and `xla_flags`, and no jax. It does two
 things before any subpackage can start jax:
 - `xla_flags.apply()`: sets XLA_FLAGS only where it is unset and the installed jaxlib is one
-  measured to need the flag (the README's "XLA flags"; `dpc_mjx/xla_flags.py`);
+  measured to need the flag (docs/scaling.md, "XLA flags on a CPU"; `dpc_mjx/xla_flags.py`);
 - keeps mujoco.mjx's two lines "Failed to import warp: ..." and "Failed to import mujoco_warp:
   ..." (printed when the optional GPU backend is absent; we use MJX's JAX backend) off stdout,
   wherever mjx is first imported (by dpc_mjx, by brax or by you): a finder that wraps the one

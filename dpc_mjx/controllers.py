@@ -45,6 +45,12 @@ class Controller(enum.StrEnum):
                 f"(or {sorted(ALIASES)} for 'dpc')."
             ) from None
 
+    @property
+    def index(self) -> int:
+        """Its place in the tables' order (0 MBC .. 3 oracle): the per-env controller of a mixed
+        batch (`envs.controller_batch`) as an integer a compiled program can select by."""
+        return list(Controller).index(self)
+
     @classmethod
     def parse_all(cls, values: Iterable[str | Controller]) -> tuple[Controller, ...]:
         """`parse` of each of `values`, in their order."""

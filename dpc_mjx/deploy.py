@@ -256,8 +256,7 @@ class Deployment:
         if policy_step:  # the policy acts at its rate, as in `DpcEnv.step`
             obs = observation(env.lay, d, x["command"], ls.ctrl.observer.estimate)
             u_policy = env.policy_u(self.policy(obs[None], jax.random.PRNGKey(0))[0])
-        u = env.controller_u(d, u_policy)
-        add = env.config.adds_observer_estimate
+        u, add = env.controller_u(d, u_policy)
         cs, ctrl = ctl.step(ls.ctrl, d, x["command"], u, x["arm_targets"], add_estimate=add)
         new = LoopState(ctrl=cs, est=est, u_policy=u_policy, tick=ls.tick + 1)
         return new, ctrl[env.lay.leg_act]

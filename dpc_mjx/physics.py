@@ -87,7 +87,7 @@ class NativePhysics:
     batch size seen), stepped in C on `threads` threads with the GIL released (Batch's nthread).
 
     One thread by default (results are bit-identical at any count). On the 2-core machine of
-    docs/benchmarks.md (`experiments/bench_limit.py`, the reaching env) two threads paid when it
+    docs/benchmarks-cpu.md (`experiments/bench_limit.py`, the reaching env) two threads paid when it
     was idle, 1,979 vs 1,434 env steps/s at batch 64 and 3,196 vs 2,876 at batch 256, and not
     when other jobs loaded it (468 vs 466 at batch 64): pass `threads` where cores are free. One
     thread is what a process pinned to one core (issue 26's target) runs."""
@@ -129,11 +129,11 @@ class NativePhysics:
     def _call(self, d: mjx.Data, advance: bool) -> mjx.Data:
         """`OUTPUTS` of mj_step (advance) or mj_forward for `d`, any batch shape (vmap).
 
-        One packed array each way, (*batch, `_in_size`) in and (*batch, `_out_size`) out, the
-        fields end to end in `INPUTS` / `OUTPUTS` order: a callback pays a cost per array it
-        passes (jax puts each input on the device and checks each output). At batch 64 a no-op
-        callback costs 0.79 ms a call with one array per field and 0.23 ms packed, and the env
-        steps ~25 % faster (experiments/bench_callback.py, bench_limit.py; docs/benchmarks.md)."""
+        One packed array each way, (*batch, `_in_size`) in and (*batch, `_out_size`) out, the fields
+        end to end in `INPUTS` / `OUTPUTS` order: a callback pays a cost per array it passes (jax
+        puts each input on the device and checks each output). At batch 64 a no-op callback costs
+        0.79 ms a call with one array per field and 0.23 ms packed, and the env steps ~25 % faster
+        (experiments/bench_callback.py, bench_limit.py; docs/benchmarks-cpu.md)."""
         packed_in = jp.concatenate([jp.ravel(getattr(d, k)).astype(self._dtype) for k in INPUTS])
         packed_out = jax.pure_callback(
             lambda x: self._host(advance, x),
@@ -218,7 +218,7 @@ def native_suits(model: mujoco.MjModel) -> bool:
 def resolve_engine(engine: str, model: mujoco.MjModel | None = None) -> str:
     """`engine` ('mjx' or 'native') as given; 'auto' resolved to 'native' where JAX runs on a
     CPU with one device (it steps the env 1.6-2.4x as fast as MJX there and compiles about 3x
-    faster: docs/benchmarks.md, "The env against MuJoCo C's physics alone") and `model`, if
+    faster: docs/benchmarks-cpu.md, "The env against MuJoCo C's physics alone") and `model`, if
     given, `native_suits`; else to 'mjx' (an accelerator, or several devices or processes, over
     which a run shards MJX's batch: `dpc_mjx.devices`). Starts JAX's backend: call it where the
     env is built, not at import."""

@@ -10,14 +10,14 @@ instructions, not its arithmetic.
 `--xla_cpu_use_fusion_emitters=false` (`OLDER_EMITTERS`, jaxlib 0.9.2, the pinned version):
 XLA:CPU's older loop emitters instead of its MLIR fusion emitters. The env step, many small
 fusions (the balance QP, the random draws), compiles about a third faster with the same steps/s
-(docs/benchmarks.md, "Compile time with the older fusion emitters"). The same HLO, so the same
+(docs/benchmarks-cpu.md, "Compile time with the older fusion emitters"). The same HLO, so the same
 arithmetic up to rounding (how a loop is vectorised, where FMA contracts): the spread between two
 CPUs, which the recorded evaluations allow. Programs compiled before it (the shipped export's
 training, the published tables until 2026-12-03) ran without it; `XLA_FLAGS=` reproduces them.
 `--xla_backend_optimization_level=1` (`LLVM_O1`, jaxlib 0.9.2): LLVM's -O1 instead of its -O3
 for the CPU kernels XLA emits. The env step compiles about 40 % faster and the reset about 3x
 (native, batch 64, one core: 32 -> 18.5 s and 17 -> 5.4 s of XLA compile) at the same env
-steps/s at batch 64 and 256 (docs/benchmarks.md, "LLVM's optimisation level"); level 0 compiles
+steps/s at batch 64 and 256 (docs/benchmarks-cpu.md, "LLVM's optimisation level"); level 0 compiles
 faster still but runs the env 2.5x slower. Dense products and other library calls are not
 emitted by LLVM and do not change; the arithmetic is the same IEEE operations, vectorised and
 scheduled differently (rounding-level differences, like the emitters').

@@ -5,7 +5,7 @@ step, as a new user's first `run_episodes` meets them.
         [--controller mbc] [--arm regular]
 
 One fresh process per run (jax's trace caches start empty; the native engine's programs never
-reach the persistent compilation cache, docs/decisions.md, and MJX's may: run with
+reach the persistent compilation cache, docs/decisions-engines.md, and MJX's may: run with
 `JAX_COMPILATION_CACHE_DIR` unset or empty for a cold figure). Prints one table: seconds of
 `jax.jit(jax.vmap(fn)).trace`, `.lower()` and `.compile()` for the reset and the step at
 `--batch`, and the env's build. To compare two commits, run it from each (a `git worktree` and

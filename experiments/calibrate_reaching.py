@@ -2,12 +2,13 @@
 
     python experiments/calibrate_reaching.py [--episodes 64] [--steps 1000] \
         [--arms regular longer heavier double] [--controllers mbc oracle] [--seed 0] \
-        [--base a1] [--engine native] [--set push_force=0,60 push_axis_weights=0.3,0.3,1 ...]
+        [--base a1] [--engine native] [--set push_force=[0,60] push_axis_weights=[0.3,0.3,1] ...]
 
 Prints a markdown table (`dpc_mjx.run.eval`: fall rate with a 95% Wilson interval, mean return with
 a 95% normal interval, RMS roll and pitch, speed and yaw-rate RMSE over the steps before a fall).
 The disturbance distributions are the reaching task's defaults unless overridden with --set (on a
-base other than the A1, scaled by its weight: `dpc_mjx.envs.registry.WEIGHT_SCALED`).
+base other than the A1, scaled by its weight: `dpc_mjx.envs.registry.WEIGHT_SCALED`); --set values
+are JSON, read as `dpc-mjx` reads them (`dpc_mjx.run.cli_tools.parse_sets`: lists as tuples).
 """
 
 from __future__ import annotations
@@ -16,13 +17,8 @@ import argparse
 import shlex
 import sys
 
+from dpc_mjx.run.cli_tools import parse_sets
 from dpc_mjx.run.eval import TABLE_HEADER, evaluate, table_row
-
-
-def _override(text: str) -> tuple[str, object]:
-    name, _, value = text.partition("=")
-    parts = [float(v) for v in value.split(",")]
-    return name, tuple(parts) if len(parts) > 1 else parts[0]
 
 
 def main() -> None:
@@ -34,9 +30,9 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--base", default="a1", help="a named base or a base file's path")
     p.add_argument("--engine", default=None, help="native or mjx (default: the library's)")
-    p.add_argument("--set", nargs="*", default=[], help="config overrides name=v or name=lo,hi")
+    p.add_argument("--set", nargs="*", default=[], help="env options name=value, values as JSON")
     args = p.parse_args()
-    overrides = dict(_override(s) for s in args.set)
+    overrides = parse_sets(args.set)
     overrides["base"] = args.base
     if args.engine is not None:
         overrides["engine"] = args.engine

@@ -17,7 +17,7 @@ before an episode's end, per component:
 
 A higher gain shortens the lag (1/K) and passes more of the measurement noise, so slow falls
 and fast rises with K. Seeds 43000.. chose nothing (the gains of the fall-rate screen were
-chosen on other seeds: docs/results.md).
+chosen on other seeds: docs/results-observer.md).
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jp
 
 import dpc_mjx
-from dpc_mjx.control import estimator, gait, qp, sensors, swing
+from dpc_mjx.control import estimator, gait, qp, sensors
 from dpc_mjx.control.balance import G_PATTERN
 from dpc_mjx.control.controller import oracle_u
 from dpc_mjx.control.state import has_fallen, read_state
@@ -90,7 +90,7 @@ def _inputs(env, state, actions):
         dist = env.sampler.advance(info["dist"], d.time, key)
         u_pol = env.policy_u(action)
         noise = sensors.draw(key, info["sensor_bias"], env.config.sensor_noise)
-        u = env.controller_u(d, u_pol)
+        u, _ = env.controller_u(d, u_pol)  # (u, whether the estimate is added)
         targets = env.arm_targets(dist, d.time, d)
         return dist, u_pol, noise, targets, u
 
@@ -119,21 +119,8 @@ def _controller_parts(t: Timer, env, d, cs, command, u, noise):
         return qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=warm, g_pattern=G_PATTERN)
 
     t.row("  balance QP solve (10 IP iterations)", solve, prob, cs.qp, per_tick=True)
-    cfg = ctl.config
-
-    def swing_legs(p, cs):
-        s = p.state
-        start = jp.where((cs.stance & ~p.stance)[:, None], s.foot_pos, cs.swing_start)
-        target = swing.raibert_foothold(
-            s.hip_pos, s.com_vel, p.vel_des, p.yaw_rate_des, s.com_pos,
-            cfg.gait.stance_time, cfg.raibert_k, ctl.lay.foot_radius,
-        )  # fmt: skip
-        p_des, v_des = swing.swing_trajectory(
-            start, target, p.progress, cfg.gait.swing_time, cfg.swing_height
-        )
-        return swing.swing_force(p_des, v_des, s.foot_pos, s.foot_vel, cfg.swing_kp, cfg.swing_kd)
-
-    t.row("  swing legs (Raibert, trajectory, PD)", swing_legs, plan, cs, per_tick=True)
+    t.row("  swing legs (Raibert, trajectory, PD)", lambda p, cs: ctl.swing_legs(cs, p), plan, cs,
+          per_tick=True)  # fmt: skip
 
 
 def _tick_rest(t: Timer, env, d, info, dist, keys):

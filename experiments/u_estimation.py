@@ -63,7 +63,7 @@ def rollouts(export: pathlib.Path, episodes: int, steps: int, seed: int) -> dict
     carry, key = rollout.start(env, episodes, seed)
     run_chunk = rollout.make_chunk(jax.vmap(env.step), policy, 50, record)
     parts = []
-    for _, (carry, records) in zip(range(steps // 50), rollout.chunks(run_chunk, carry, key)):
+    for carry, records in rollout.chunks(run_chunk, carry, key, steps // 50):
         parts.append(records)
     out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     done_before = np.cumsum(out["done"], axis=0) - out["done"]  # dones before this step

@@ -17,8 +17,8 @@ jax.config.update("jax_compilation_cache_dir", os.environ.get("DPC_JAX_CACHE", s
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 # The files that compile most, longest first, from `pytest --durations` of a cold `make test`
-# (README, "make test"; 2026-12-03); every other file runs after them in collection order. A
-# stale order costs only balance between the workers, never a test.
+# (docs/commands.md, "make test"; 2026-12-03); every other file runs after them in collection order.
+# A stale order costs only balance between the workers, never a test.
 _LONGEST_FIRST = (
     "test_qp.py",
     "test_eval_regression.py",

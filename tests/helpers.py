@@ -14,7 +14,7 @@ FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive
 
 # The physics of the envs in tests that do not test MJX itself (issue 26: "tests that do not test
 # MJX itself use the faster path"): MuJoCo C through `mujoco.batch` (`dpc_mjx/physics.py`), whose
-# env programs compile about 3x faster (experiments/bench_limit.py in docs/benchmarks.md: a
+# env programs compile about 3x faster (experiments/bench_limit.py in docs/benchmarks-cpu.md: a
 # 10-step chunk, batch 64, 37 s native against 103 s under MJX). MJX keeps its own tests:
 # test_mjx, test_objects, test_controller, test_eval_regression, test_sweep, test_physics,
 # test_devices.
@@ -46,20 +46,34 @@ class CountTraces(Wrapper):
 
 
 @contextlib.contextmanager
-def recorded_compiles():
-    """Yields a list that collects the JAX compile events of the block."""
-    compiles = []
+def _duration_events(pick):
+    """Yields a list of `pick(event, fun_name)` for each JAX duration event of the block for
+    which it is not None."""
+    seen = []
 
-    def listener(event, duration, **_):
+    def listener(event, duration, fun_name="", **_):
         del duration
-        if "compile" in event:
-            compiles.append(event)
+        item = pick(event, fun_name)
+        if item is not None:
+            seen.append(item)
 
     jax.monitoring.register_event_duration_secs_listener(listener)
     try:
-        yield compiles
+        yield seen
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def recorded_compiles():
+    """Yields a list that collects the JAX compile events of the block."""
+    return _duration_events(lambda event, _: event if "compile" in event else None)
+
+
+def lowered_programs():
+    """Yields a list of the name of every function the block lowers to a program (JAX's
+    jaxpr-to-MLIR event, which fires whether or not the persistent cache then holds it)."""
+    lowering = "/jax/core/compile/jaxpr_to_mlir_module_duration"
+    return _duration_events(lambda event, name: name if event == lowering else None)
 
 
 def model_bytes(model: mujoco.MjModel) -> bytes:

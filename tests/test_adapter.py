@@ -57,6 +57,19 @@ def test_collect_returns_exactly_the_samples_asked(env, data):
     )
 
 
+def test_staggered_starts_cut_each_first_episode_at_its_own_step_and_drop_the_burn_in(env):
+    batched = dpc_mjx.envs.wrap_for_training(env)
+    state = batched.reset(jax.random.split(jax.random.PRNGKey(0), 256))
+    length, burn_in = env.config.episode_length, 300
+    steps = np.asarray(adapter.data._staggered(state, length, burn_in, seed=0).info["steps"])
+    left = length - steps  # steps until each env's first episode is cut (k_i ~ U{1 .. burn_in})
+    assert left.min() >= 1 and left.max() <= burn_in
+    assert len(np.unique(left)) > 100  # spread, not one phase for all envs
+    # with burn_in steps in 2 chunks the first 2 chunks' rows are dropped
+    got = adapter.collect(env, 64, n_envs=_ENVS, chunk=_CHUNK, progress=False, burn_in=40)
+    assert len(got) == 64 and got.env_steps == 3 * _CHUNK * _ENVS
+
+
 def test_adapter_loss_decreases_and_beats_a_constant_predictor(data, trained):
     h = trained.history
     assert h["train_nll"][-1] < h["train_nll"][0]

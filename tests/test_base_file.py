@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dpc_mjx import DpcError, assets
-from dpc_mjx.robots import a1, arm_file
+from dpc_mjx.robots import a1, arm_file, base_file, build
 from dpc_mjx.robots.base_file import (
     LEGS,
     MESHES,
@@ -25,6 +25,7 @@ from dpc_mjx.robots.urdf import strip_meshes
 _MASS_TOL = 1e-5  # kg: the file's masses summed vs the spec's (Go1's, B1's 1e-6 kg roots dropped)
 _FOOT_TOL = 1e-5  # m: a home foot's centre vs its target (the solver stops within 1e-6 m)
 _EXACT = 1e-9  # m, rad: values copied from the file or from robots.a1
+_ABDUCTION_TOL = 1e-6  # rad: a home hip ab/adduction left at 0 (the solver stops within 1e-6 m)
 _A1_HOME_ANGLE_TOL = 0.01  # rad: the solved A1 home vs robots.a1.HOME_LEG (0.9, -1.8 at 0.27 m)
 _UNITREE_PARTS = ("hip", "thigh", "calf")  # Unitree's names: {place}_{part}_joint, hip to knee
 _BASES = ("a1", "b1", "go1", "go2")  # the named bases alone (b1-z1: the B1 with its Z1, below)
@@ -263,3 +264,44 @@ def test_the_z1_split_from_b1_z1_is_the_z1_arm(tmp_path):
     ours, theirs = split.spec.compile(), z1.spec.compile()  # the same links, masses, inertias
     for field in ("body_mass", "body_inertia", "body_pos", "jnt_axis"):
         np.testing.assert_allclose(getattr(ours, field), getattr(theirs, field), atol=_EXACT)
+
+
+@pytest.mark.skipif(not assets.wheel_installed(), reason="needs the example-robot-data wheel")
+@pytest.mark.filterwarnings("ignore:.*fused 37 link")  # ANYmal C's (tests/test_urdf_fuse.py)
+@pytest.mark.parametrize(
+    "file",
+    [
+        "solo_description/robots/solo12.urdf",  # straight legs at the zero pose
+        "anymal_c_simple_description/urdf/anymal.urdf",  # feet outboard of the thigh joints
+    ],
+)
+def test_home_stands_where_the_legs_hang_sideways_and_from_a_bent_knee(file, monkeypatch):
+    """Feet on the floor under the thigh joint fore-aft, sideways where they hang at the zero
+    pose (ANYmal C's shank is offset outboard); a leg straight at the zero pose (Solo 12's) is
+    solved again from a bent knee (`base_measure.solve_home`). Solo 12's file declares
+    placeholder efforts, refused below; the home pose does not depend on them."""
+    monkeypatch.setattr(base_file, "check_efforts", lambda *args: None)
+    spec = read_base(assets.wheel_urdf(file))
+    base_file._read_cached.cache_clear()  # no spec read without the check outlives the test
+    model = build("none", base=spec)
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    mujoco.mj_kinematics(model, data)
+    trunk = model.body(spec.trunk).id
+    for leg in spec.legs:
+        foot = _in_trunk_frame(
+            model, data, spec.trunk, data.site_xpos[model.site(f"{leg.place}_foot").id]
+        )
+        assert data.xpos[trunk][2] + foot[2] - leg.foot_radius == pytest.approx(0.0, abs=_FOOT_TOL)
+        assert foot[0] == pytest.approx(leg.hip[0], abs=_FOOT_TOL)
+        assert leg.home[0] == pytest.approx(0.0, abs=_ABDUCTION_TOL)  # it hangs as at zero
+
+
+@pytest.mark.skipif(not assets.wheel_installed(), reason="needs the example-robot-data wheel")
+def test_a_placeholder_effort_is_refused_naming_the_leg_and_the_fix():
+    """Solo 12's URDF gives every joint effort="1000" N·m, hundreds of times what holding its
+    2.5 kg up takes; the controller would scale damping and armature by it (it fell in 16 of 16
+    episodes with an arm), so the file is refused with what to correct."""
+    base_file._read_cached.cache_clear()  # read anew, with the check
+    with pytest.raises(DpcError, match=r"leg FR's joints declare efforts .*placeholder.*effort"):
+        read_base(assets.wheel_urdf("solo_description/robots/solo12.urdf"))

@@ -8,8 +8,11 @@ model was added; one controller is enough to keep it so). Its DPC rows belonged 
 shipped then, which is gone.
 
 `tests/data/eval_regression_shipped.json`, recorded when the present export was shipped (see its
-`recorded` key): all four controllers on the shipped export with its env options (sensors on).
-Both were recorded in MJX, which these tests ask for by name (a CPU's default is native MuJoCo C).
+`recorded` key): all four controllers on the shipped export with its env options (sensors on),
+each controller an env of its own then (its own compiled reset and chunk); today's evaluation
+runs the four in one batch, one program (`envs.controller_batch`), which must give the same
+episodes. Both were recorded in MJX, which these tests ask for by name (a CPU's default is
+native MuJoCo C).
 
 Seed 4242 chose nothing. The episodes are short (100 env steps, 2 s), so that a change of
 arithmetic shows as a small drift of the continuous metrics rather than as other episodes. On one
@@ -30,11 +33,13 @@ import sys
 import jax
 import numpy as np
 import pytest
+from helpers import lowered_programs
 
 from dpc_mjx import DpcError
 from dpc_mjx.envs.rollout import run_episodes
-from dpc_mjx.run.eval import EPISODE_COLUMNS, evaluate
+from dpc_mjx.run.eval import evaluate
 from dpc_mjx.run.pipeline import SHIPPED, evaluate_export
+from dpc_mjx.run.report import EPISODE_COLUMNS
 
 DATA = pathlib.Path(__file__).parent / "data"
 EXACT = DATA / "eval_regression.json"
@@ -90,29 +95,24 @@ def _evaluate_shipped(csv_path=None, controllers=None):
     )
 
 
-# The default run checks DPC (the policy's whole path, over the MBC controller it adds u to); MBC,
-# the observer and the oracle, one compile each, are checked by the slow test below
-# (`make test-all`).
-DEFAULT_CONTROLLERS = ("dpc",)
-
-
 @pytest.fixture(scope="module")
 def evaluated(tmp_path_factory):
     path = tmp_path_factory.mktemp("eval") / "episodes.csv"
-    recording = {c: _recording(SHIPPED_RECORDING)[c] for c in DEFAULT_CONTROLLERS}
-    return _evaluate_shipped(path, list(recording)), recording, path
+    recording = _recording(SHIPPED_RECORDING)  # mbc, observer, dpc, oracle
+    with lowered_programs() as programs:
+        cells = _evaluate_shipped(path, list(recording))
+    return cells, recording, path, programs
 
 
 def test_shipped_export_evaluates_as_recorded(evaluated):
-    cells, recording, _ = evaluated
+    cells, recording, _, _ = evaluated
     _assert_as_recorded(cells, recording)
 
 
-@pytest.mark.slow
-def test_shipped_export_evaluates_as_recorded_under_the_other_controllers():
-    recording = _recording(SHIPPED_RECORDING)
-    others = {c: r for c, r in recording.items() if c not in DEFAULT_CONTROLLERS}
-    _assert_as_recorded(_evaluate_shipped(controllers=list(others)), others)
+def test_four_controllers_compile_one_reset_and_one_chunk(evaluated):
+    *_, programs = evaluated
+    assert programs.count("jit(reset_batch)") == 1, programs
+    assert programs.count("jit(chunk_steps)") == 1, programs
 
 
 @pytest.mark.slow  # a third evaluation's compile (~2 min on 2 cores); `make test-all`
@@ -131,7 +131,7 @@ def test_exact_sensors_evaluate_as_the_envs_before_the_sensor_model():
 
 
 def test_eval_writes_one_csv_row_per_episode(evaluated):
-    cells, _, path = evaluated
+    cells, _, path, _ = evaluated
     with path.open() as f:
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == EPISODE_COLUMNS

@@ -94,7 +94,8 @@ def test_the_collection_splits_the_budget_and_the_envs_over_the_family(monkeypat
         calls.append(("make", arm))
         return arm  # the env stands for its arm
 
-    def collect(env, samples, n_envs, seed, progress):
+    def collect(env, samples, n_envs, seed, progress, burn_in):
+        assert burn_in == config.data_burn_in
         calls.append(("collect", env, samples, n_envs, seed))
         return _part(samples, n_envs, float(len(calls)))
 

@@ -1,6 +1,6 @@
 """The layers hold: import-linter's contract (pyproject.toml) is kept, it is the layer diagram of
-the README's Architecture section, and no dpc_mjx modules import each other in a circle (imports
-inside functions counted)."""
+docs/architecture.md ("The layers"), and no dpc_mjx modules import each other in a circle
+(imports inside functions counted)."""
 
 import pathlib
 import re
@@ -30,12 +30,12 @@ def _names(layer: str) -> tuple[frozenset[str], bool]:
     return frozenset(n.strip() for n in layer.split(sep)), sep == "|"
 
 
-def _readme_layers() -> list[tuple[frozenset[str], bool]]:
-    """The rows of the diagram in the README's Architecture section, top to bottom: a row starts
+def _drawn_layers() -> list[tuple[frozenset[str], bool]]:
+    """The rows of the diagram in docs/architecture.md ("The layers"), top to bottom: a row starts
     with one space and its label (`run/`, `deploy.py | sac/`, `utilities`), the rest of the row
     is indented further. The utilities row stands for the top-level modules it names."""
-    text = (ROOT / "README.md").read_text()
-    start = text.index("## Architecture")
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    start = text.index("## The layers")
     section = text[start : text.index("\n## ", start + 1)]
     diagram = section.split("```")[1]
     rows: list[tuple[str, list[str]]] = []
@@ -83,16 +83,16 @@ def test_the_contract_refuses_an_upward_import():
     assert (broken.importer, broken.imported) == ("dpc_mjx.robots", "dpc_mjx.policy")
 
 
-def test_the_readme_draws_the_layers_of_the_contract():
-    drawn = _readme_layers()
+def test_the_architecture_page_draws_the_layers_of_the_contract():
+    drawn = _drawn_layers()
     declared = [_names(layer) for layer in _contract_layers()]
     assert [names for names, _ in drawn] == [names for names, _ in declared], (
-        "The README's Architecture diagram and pyproject.toml's import-linter layers differ: "
-        f"README {[sorted(n) for n, _ in drawn]}, contract {[sorted(n) for n, _ in declared]}"
+        "docs/architecture.md's layer diagram and pyproject.toml's import-linter layers differ: "
+        f"drawn {[sorted(n) for n, _ in drawn]}, contract {[sorted(n) for n, _ in declared]}"
     )
     for (names, apart), (_, independent) in zip(drawn, declared, strict=True):
         if apart:  # drawn 'a | b': siblings that do not import each other
-            assert independent, f"{sorted(names)}: the README draws '|', the contract has ':'"
+            assert independent, f"{sorted(names)}: the page draws '|', the contract has ':'"
 
 
 def _runtime_edges(graph) -> dict[str, set[str]]:

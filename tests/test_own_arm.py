@@ -1,5 +1,5 @@
 """Bring your own arm: a URDF or MJCF file the library has never seen, checked before any compile,
-built on the A1, stepped in MJX, transferred to and evaluated (README: "Your own arm")."""
+built on the A1, stepped in MJX, transferred to and evaluated (docs/own-arm.md)."""
 
 import json
 import shutil

@@ -15,7 +15,7 @@ from dpc_mjx.run.config import RunConfig, read_run_config, recipe, start_run, tu
 from dpc_mjx.run.pipeline import SHIPPED, SHIPPED_PAPER
 from dpc_mjx.sac import SacConfig
 
-TRANSFERRED = ("longer", "heavier", "double", "so100", "z1", "pusher")  # docs/results.md
+TRANSFERRED = ("longer", "heavier", "double", "so100", "z1", "pusher")  # docs/results-transfer.md
 
 
 def test_run_config_takes_dotted_overrides_and_round_trips_through_json(tmp_path):
@@ -68,17 +68,22 @@ def test_the_paper_recipe_is_sac_from_a_random_actor_with_an_asymmetric_critic(t
 
 
 def test_the_gpu_preset_keeps_the_learning_rule_per_env_step(tmp_path):
-    """More envs per actor step on a GPU, the same update-to-data ratio and actor steps per
-    epoch; --device picks a preset, --set still wins over it."""
+    """More envs everywhere on a GPU: SAC's with the same update-to-data ratio and actor steps
+    per epoch, the adapter's data with staggered starts, 1,024 evaluation episodes in whole-
+    episode chunks; --device picks a preset (auto: the backend's), --set still wins over it."""
     cpu, gpu = recipe("paper", "cpu"), recipe("paper", "gpu")
-    assert gpu.sac.num_envs == 4 * cpu.sac.num_envs
+    assert gpu.sac.num_envs == 16 * cpu.sac.num_envs
     ratio = lambda c: c.sac.grad_updates_per_step / c.sac.num_envs  # noqa: E731
-    assert ratio(gpu) == ratio(cpu)
+    assert ratio(gpu) == ratio(cpu) == 1 / 4
     assert gpu.sac.actor_steps_per_epoch == cpu.sac.actor_steps_per_epoch
+    assert (cpu.data_envs, cpu.data_burn_in, cpu.eval_episodes) == (64, 0, 64)
+    assert gpu.data_envs == 2048 and gpu.data_burn_in == gpu.episode_steps
+    assert gpu.eval_episodes >= 1024 and gpu.eval_chunk == gpu.episode_steps
     assert recipe("paper", "tpu") == gpu and recipe("paper") == cpu
+    assert recipe("paper", "auto") == cpu  # the tests run on a CPU
     args = ["train", "--run", str(tmp_path), "--device", "gpu", "--set", "sac.num_envs=512"]
     config = cli._run_config(cli._parser().parse_args(args))
-    assert config.sac.num_envs == 512 and config.sac.grad_updates_per_step == 64
+    assert config.sac.num_envs == 512 and config.sac.grad_updates_per_step == 256
     with pytest.raises(DpcError, match="Unknown device preset 'npu'"):
         recipe("default", "npu")
 

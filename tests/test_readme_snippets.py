@@ -1,16 +1,20 @@
-"""The README's Python snippets run as written (`exec`, in the README's order).
+"""The Python snippets of the README and of the docs guides run as written (`exec`, in the order
+of `PAGES`, each page's in its order). `test_every_page_with_a_snippet_is_read` keeps every page
+that holds a ```python block (README.md, docs/**/*.md) in `PAGES`.
 
-A reader runs them as one session: the Quick start's snippets share one namespace (later ones use
-the names of earlier ones). Two snippets need more than the README gives them:
-- the training pipeline runs on a tiny budget (`TINY`: each README text is replaced by a small
-  one, and each must occur in the snippet exactly once, so an edit of the README that drops one
+A reader runs them as one session: the snippets of docs/python.md share one namespace (later ones
+use the names of earlier ones). Two snippets need more than the page gives them:
+- the training pipeline runs on a tiny budget (`TINY`: each of its texts is replaced by a small
+  one, and each must occur in the snippet exactly once, so an edit of the page that drops one
   fails here instead of training for hours); it is `slow` (a dozen compiles);
 - the deployment loop gets `measurement`, the robot's reading: what exact sensors read on the
   shipped export's robot standing at its home pose (tests/test_deploy.py has noisy ones).
-`test_every_snippet_is_run` fails on a snippet that no test runs. The default suite runs the
-deployment snippet (its compile is tests/test_deploy.py's, from the compilation cache) and imports
-every name the snippets import; the Quick start's snippets (a few minutes of compiling and 20 s
-of walking) and the pipeline are `slow` (`make test-all`).
+`test_every_snippet_is_run` fails on a snippet that no test runs (the README's ONNX snippet runs in
+tests/test_onnx.py). The default suite runs the deployment snippet (its compile is
+tests/test_deploy.py's, from the compilation cache) and imports every name the snippets import;
+the session's snippets (a few minutes of compiling and 20 s of walking) and the pipeline are
+`slow` (`make test-all`).
+The README's `dpc-mjx` command lines are parsed by the CLI (`test_every_readme_command_parses`).
 """
 
 import ast
@@ -19,6 +23,7 @@ import importlib
 import importlib.util
 import pathlib
 import re
+import shlex
 
 import mujoco
 import numpy as np
@@ -27,10 +32,15 @@ from test_sac import _CONFIG
 
 from dpc_mjx.deploy import Measurement
 from dpc_mjx.robots import build, layout
+from dpc_mjx.run import cli
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
+# The pages whose ```python blocks run, in a reader's order: the README's Quick start (ONNX), the
+# library in Python (the session, then the pipeline), the robot's loop.
+PAGES = ("README.md", "docs/python.md", "docs/deployment.md")
+PYTHON_BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
 
-SESSION = "import jax, numpy as np"  # the first line of the Quick start's first snippet
+SESSION = "import jax, numpy as np"  # the first line of docs/python.md's first snippet
 PIPELINE = "sac.train("  # the training pipeline's snippet holds this
 DEPLOY = "Deployment("  # the deployment loop's snippet holds this
 ONNX = "ort.InferenceSession("  # the ONNX snippet, run by tests/test_onnx.py
@@ -39,8 +49,8 @@ ONNX = "ort.InferenceSession("  # the ONNX snippet, run by tests/test_onnx.py
 _TINY_FIELDS = ("num_timesteps", "num_envs", "batch_size", "grad_updates_per_step")
 _TINY_FIELDS += ("min_replay_size", "max_replay_size", "epoch_steps")
 TINY_SAC = {name: getattr(_CONFIG, name) for name in _TINY_FIELDS} | {"eval_every": 0}
-# README text -> what the test runs instead: one chunk of 64 envs x 50 steps of data, the tiny
-# SAC above, 2 episodes of 10 steps in each evaluation cell.
+# The snippet's text -> what the test runs instead: one chunk of 64 envs x 50 steps of data, the
+# tiny SAC above, 2 episodes of 10 steps in each evaluation cell.
 TINY = {
     "samples=100_000": "samples=3_200",
     '"so100", controller="mbc"), 30_000)': '"so100", controller="mbc"), 3_200)',
@@ -50,17 +60,16 @@ TINY = {
 
 
 def snippets() -> list[str]:
-    """Every ```python block of README.md, in order."""
-    text = (ROOT / "README.md").read_text()
-    return re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
+    """Every ```python block of the `PAGES`, in order."""
+    return [b for page in PAGES for b in PYTHON_BLOCK.findall((ROOT / page).read_text())]
 
 
 def _run(code: str, namespace: dict, name: str) -> None:
-    exec(compile(code, f"README.md ({name})", "exec"), namespace)  # noqa: S102 (our README)
+    exec(compile(code, f"docs snippet ({name})", "exec"), namespace)  # noqa: S102 (our docs)
 
 
 def _session() -> list[str]:
-    """The Quick start's snippets: from the first through the last before the pipeline's."""
+    """The session's snippets: from the first through the last before the pipeline's."""
     blocks = snippets()
     first = next(i for i, b in enumerate(blocks) if b.startswith(SESSION))
     end = next(i for i, b in enumerate(blocks) if PIPELINE in b)
@@ -70,8 +79,34 @@ def _session() -> list[str]:
 def test_every_snippet_is_run():
     blocks = snippets()
     run = _session() + [b for b in blocks if PIPELINE in b or DEPLOY in b or ONNX in b]
-    assert len(blocks) >= 6, "README.md lost its Python snippets"
-    assert sorted(run) == sorted(blocks), "a README snippet no test runs"
+    assert len(blocks) >= 6, f"{PAGES} lost their Python snippets"
+    assert sorted(run) == sorted(blocks), "a snippet no test runs"
+
+
+def test_every_page_with_a_snippet_is_read():
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    with_code = {
+        p.relative_to(ROOT).as_posix() for p in pages if PYTHON_BLOCK.search(p.read_text())
+    }
+    unread = sorted(with_code - set(PAGES))
+    assert not unread, f"pages with ```python snippets that no test reads: {unread}"
+
+
+def readme_commands() -> list[list[str]]:
+    """The `dpc-mjx` command lines of the README's ```bash blocks, each as its arguments (a
+    trailing `# comment` dropped)."""
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"^```bash\n(.*?)^```", text, flags=re.S | re.M)
+    lines = [line.split(" #")[0] for block in blocks for line in block.splitlines()]
+    return [shlex.split(line)[1:] for line in lines if line.startswith("dpc-mjx ")]
+
+
+def test_every_readme_command_parses():
+    """The cheap check of the README's Quick start commands: each is one the CLI accepts."""
+    commands = readme_commands()
+    assert len(commands) >= 8, "the README lost its Quick start commands"
+    for argv in commands:
+        cli._parser().parse_args(argv)  # argparse exits on a command it does not accept
 
 
 def test_every_name_a_snippet_imports_exists():
@@ -86,14 +121,14 @@ def test_every_name_a_snippet_imports_exists():
                 for alias in node.names:
                     assert hasattr(module, alias.name) or importlib.util.find_spec(
                         f"{node.module}.{alias.name}"
-                    ), f"README: `from {node.module} import {alias.name}` fails"
+                    ), f"{PAGES}: `from {node.module} import {alias.name}` fails"
 
 
 @pytest.mark.slow
 def test_quick_start_snippets(capsys):
     namespace: dict = {}
     for i, code in enumerate(_session()):
-        _run(code, namespace, f"Quick start snippet {i + 1}")
+        _run(code, namespace, f"docs/python.md, snippet {i + 1}")
     assert "fall" in capsys.readouterr().out  # closed_loop.summarize's line
     assert namespace["ep"]["return"].shape == (8,)  # run_episodes' 8 episodes
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.run.eval import EPISODE_COLUMNS, cell_result, paired_row, write_episodes_csv
+from dpc_mjx.run.eval import cell_result, paired_row
 from dpc_mjx.run.report import (
+    EPISODE_COLUMNS,
     KEY_COLUMNS,
     ci_text,
     pair,
@@ -18,6 +19,7 @@ from dpc_mjx.run.report import (
     read_controller,
     read_episodes,
     versus_baseline,
+    write_episodes_csv,
 )
 from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci
 

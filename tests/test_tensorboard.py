@@ -29,7 +29,8 @@ from dpc_mjx.adapter import checkpoint as adapter_checkpoint
 from dpc_mjx.io.shipped import SHIPPED
 from dpc_mjx.run import cli
 from dpc_mjx.run.config import RunConfig, start_run
-from dpc_mjx.run.eval import cell_result, write_episodes_csv
+from dpc_mjx.run.eval import cell_result
+from dpc_mjx.run.report import write_episodes_csv
 from dpc_mjx.run.tensorboard import EVAL_SCALARS, METRICS, eval_tag, logdir_of, run_events
 from dpc_mjx.sac import log as sac_log
 from dpc_mjx.writer import barrier

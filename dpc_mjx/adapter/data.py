@@ -189,6 +189,16 @@ class Dataset:
         return self.take(slice(0, len(self) - n_val)), self.take(slice(len(self) - n_val, None))
 
 
+def _staggered(state, episode_length: int, burn_in: int, seed: int):
+    """`state` (a `wrap_for_training` batch just reset) with env i's episode step counter set so
+    that its first episode ends after k_i ~ U{1 .. min(burn_in, episode_length)} steps."""
+    n = state.info["steps"].shape[0]
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), 7)  # apart from the envs' own keys
+    k = jax.random.randint(key, (n,), 1, min(burn_in, episode_length) + 1)
+    steps = (episode_length - k).astype(state.info["steps"].dtype)
+    return state.replace(info={**state.info, "steps": steps})
+
+
 def collect(
     env: DpcEnv,
     samples: int,
@@ -197,10 +207,17 @@ def collect(
     chunk: int = 50,
     progress: bool = True,
     policy: rollout.Policy = rollout.zero_policy,
+    burn_in: int = 0,
 ) -> Dataset:
     """Exactly `samples` random-motion transitions from `n_envs` envs stepped in jitted chunks of
     `chunk` env steps, with actions from `policy` (default 0: u = 0 for a 'policy' env, ignored
-    by 'mbc'; a trained policy on a 'policy' env gives the student's own states, for DAgger)."""
+    by 'mbc'; a trained policy on a 'policy' env gives the student's own states, for DAgger).
+
+    `burn_in` > 0 staggers the starts: each env's first episode is cut short after a random
+    number of steps, uniform in 1 .. burn_in, and the rows of the first burn_in steps (rounded
+    up to whole chunks) are dropped; with burn_in = the episode length the kept rows' episode
+    ages are spread evenly, as a few envs' long trajectories are, however many envs there are
+    (`RunConfig.data_burn_in`; many envs would otherwise give only each episode's first steps)."""
     if not isinstance(samples, int) or samples < 1:
         raise DpcError(f"samples must be a positive int, got {samples!r}.")
     if not isinstance(n_envs, int) or n_envs < 1:
@@ -221,16 +238,22 @@ def collect(
     size = devices.padded(n_envs)
     keys = devices.shard(devices.pad(jax.random.split(key, n_envs), size), size)
     state = jax.jit(lambda k: devices.constrain(batched.reset(k), size))(keys)
+    if burn_in:
+        state = _staggered(state, env.unwrapped.config.episode_length, burn_in, seed)
     run_chunk = rollout.make_chunk(batched.step, policy, chunk, record)
     carry = (state, devices.shard(rollout.Tally.zeros(size), size))
     ids = np.tile(np.arange(n_envs, dtype=np.int32), chunk)  # row order: (time, env)
     parts, kept, steps = [], 0, 0
+    burn_chunks = -(-burn_in // chunk)  # the burn-in's chunks, their rows dropped
     with bar(samples, "collect", "sample", progress) as pbar:
-        for _, out in rollout.chunks(run_chunk, carry, key):
+        for i, (_, out) in enumerate(rollout.chunks(run_chunk, carry, key)):
+            steps += chunk * n_envs
+            if i < burn_chunks:  # staggered starts: these rows are dropped
+                pbar.set_postfix_str(f"burn-in {(i + 1) * chunk}/{burn_chunks * chunk} steps")
+                continue
             obs, u, yaw, drp, keep = (x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out)
             parts.append((obs[keep], drp[keep], ids[keep], u[keep], yaw[keep]))
             kept += int(keep.sum())
-            steps += obs.shape[0]
             pbar.update(min(int(keep.sum()), samples - pbar.n))
             if kept >= samples:
                 break

@@ -10,8 +10,8 @@
   swing.py        footholds, swing trajectories and the swing-foot PD
   closed_loop.py  the controller alone on MJX physics, with locomotion metrics
 
-Rotations (yaw, rotation vectors, skew matrices) are in `dpc_mjx.rotations`. docs/decisions.md
-explains the choices.
+Rotations (yaw, rotation vectors, skew matrices) are in `dpc_mjx.rotations`.
+docs/decisions-controller.md explains the choices.
 """
 
 from dpc_mjx.control import closed_loop, observer

@@ -144,6 +144,31 @@ class LowLevelController:
             u[3:],
         )
 
+    def swing_legs(self, cs: ControllerState, p: Plan) -> tuple[jax.Array, jax.Array]:
+        """The swing feet of this tick: (4, 3) m, world, each foot's position at its last
+        lift-off (recorded as it lifts off), and (4, 3) N, world, the PD force that tracks a
+        trajectory from there to its Raibert foothold (stance feet: ignored by `step`)."""
+        cfg, s = self.config, p.state
+        lift_off = cs.stance & ~p.stance
+        swing_start = jp.where(lift_off[:, None], s.foot_pos, cs.swing_start)
+        target = swing.raibert_foothold(
+            s.hip_pos,
+            s.com_vel,
+            p.vel_des,
+            p.yaw_rate_des,
+            s.com_pos,
+            cfg.gait.stance_time,
+            cfg.raibert_k,
+            self.lay.foot_radius,  # m: the foothold's z, the foot sphere's centre on the ground
+        )
+        p_des, v_des = swing.swing_trajectory(
+            swing_start, target, p.progress, cfg.gait.swing_time, cfg.swing_height
+        )
+        f_swing = swing.swing_force(
+            p_des, v_des, s.foot_pos, s.foot_vel, cfg.swing_kp, cfg.swing_kd
+        )
+        return swing_start, f_swing
+
     def step(
         self,
         cs: ControllerState,
@@ -152,48 +177,31 @@ class LowLevelController:
         u: jax.Array | None,
         arm_targets: jax.Array | None = None,
         noise: sensors.SensorNoise | None = None,
-        add_estimate: bool = False,
+        add_estimate: bool | jax.Array = False,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
         the disturbance observer's estimate of this tick (the `observer` controller), or with
         `add_estimate` a residual added to that estimate (DPC on the observer,
-        `EnvConfig.u_base`); `noise` the measurement errors of this tick
+        `EnvConfig.u_base`; a traced () bool where each env of a batch has its own controller,
+        `envs.controller_batch`); `noise` the measurement errors of this tick
         (`control/sensors.py`; None: exact sensors).
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
         cfg = self.config
         p = self.plan(cs, d, command, noise)
-        s, stance, progress, vel_des = p.state, p.stance, p.progress, p.vel_des
+        s, stance = p.state, p.stance
         observed = self._observe(cs, s)  # this tick's data, the previous tick's forces
         if u is None:
             u = observed.estimate
-        elif add_estimate:
-            u = observed.estimate + u
+        elif add_estimate is not False:  # True, or a traced () bool (selects per env)
+            u = jp.where(add_estimate, observed.estimate + u, u)
         prob = self.balance_qp(p, u)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
         )
         forces = res.x.reshape(4, 3) * stance[:, None]  # N, world, swing feet exactly 0
 
-        # Swing feet: record lift-off, track a trajectory to the Raibert foothold.
-        lift_off = cs.stance & ~stance
-        swing_start = jp.where(lift_off[:, None], s.foot_pos, cs.swing_start)
-        target = swing.raibert_foothold(
-            s.hip_pos,
-            s.com_vel,
-            vel_des,
-            command[2],
-            s.com_pos,
-            cfg.gait.stance_time,
-            cfg.raibert_k,
-            self.lay.foot_radius,  # m: the foothold's z, the foot sphere's centre on the ground
-        )
-        p_des, v_des = swing.swing_trajectory(
-            swing_start, target, progress, cfg.gait.swing_time, cfg.swing_height
-        )
-        f_swing = swing.swing_force(
-            p_des, v_des, s.foot_pos, s.foot_vel, cfg.swing_kp, cfg.swing_kd
-        )
+        swing_start, f_swing = self.swing_legs(cs, p)
 
         # Stance legs push the ground with -f (so the ground pushes back with f); swing legs
         # apply the PD force: tau = J^T f per leg.

@@ -6,12 +6,10 @@ step] at the physics rate (250 Hz), with u chosen by `config.controller`. The ph
 default native on a CPU, MJX on an accelerator: `dpc_mjx/physics.py`); everything else is the
 same code under both engines.
 
-    'dpc'   : u = u_scale * a, a = clip(action, -1, 1) (`EnvConfig.u_scale`)   ('policy' too)
-              in the yaw frame (turned to the world at each tick) or the world frame
-              (`EnvConfig.u_frame`); with `u_base='observer'` added to the observer's estimate
-    'mbc'   : u = 0, the action is ignored                                       (paper baseline)
-    'oracle': u = measured arm-mount wrench (`controller.oracle_u`), action ignored
-    'observer': u = the momentum observer's estimate (`control/observer.py`), action ignored
+u by controller (`dpc_mjx.controllers`): 'mbc' 0; 'observer' the momentum observer's estimate;
+'oracle' the measured arm-mount wrench; 'dpc' u_scale * clip(action, -1, 1) (`EnvConfig.u_scale`)
+in the yaw frame (`u_frame`), with `u_base='observer'` added to the observer's estimate. The
+action is ignored by all but 'dpc'. `info['controller']`, where present, picks it per env.
 
 State (brax `State`):
     pipeline_state  mjx.Data
@@ -24,6 +22,8 @@ State (brax `State`):
                     (sensor_delay, nu) ctrl computed but not yet applied (`control/sensors.py`);
                     'privileged' (10,) [u_oracle, payload, ee_force] (`observations.PRIVILEGED`);
                     'nan_reset' () 1.0 when this step was non-finite or exploded;
+                    'controller' () int32 `Controller.index`, only in a batch of mixed
+                    controllers (`envs.controller_batch`), else `config.controller`;
                     'objects' (n_obj, 3) m, world positions of the scene's free objects (box,
                     balls; `objects.prop_layout` order), only in scenes that have some
 
@@ -49,8 +49,6 @@ with done = 1 and is counted in `metrics['nan_resets']`; the auto-reset wrapper
 
 from __future__ import annotations
 
-import copy
-
 import jax
 import jax.numpy as jp
 import mujoco
@@ -62,6 +60,7 @@ from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
 from dpc_mjx.control.controller import make_controller, oracle_u
 from dpc_mjx.control.state import has_fallen
+from dpc_mjx.controllers import Controller
 from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, make_sampler
@@ -112,22 +111,6 @@ class DpcEnv(Env):
         cols = np.cumsum([0] + [len(a.act) for a in self.lay.arms])
         self._arm_cols = [np.arange(cols[k], cols[k + 1]) for k in range(len(self.lay.arms))]
         self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
-
-    def with_model(self, mx: mjx.Model) -> DpcEnv:
-        """This env on `mx`, a model of the same structure with other continuous values (one
-        element of `robots.params.batch_arm_params`'s batch, inside `jax.vmap`: `ModelBatchEnv`).
-        Physics, the data and the end-effector Jacobians use `mx`; the controller keeps its
-        model of the bare A1, which an arm's parameters do not touch. MJX engine only (the
-        native engine steps the one compiled `MjModel`)."""
-        if self.config.engine != "mjx":
-            raise DpcError(
-                f"A batch of models runs on the MJX engine only (this env has engine="
-                f"{self.config.engine!r}); build the env with engine='mjx'."
-            )
-        env = copy.copy(self)
-        env.mx = mx
-        env.physics = make_physics("mjx", self.model, mx)
-        return env
 
     # task hooks -----------------------------------------------------------------------------
 
@@ -294,9 +277,8 @@ class DpcEnv(Env):
         def substep(carry, tick_key):
             d, cs, queue, _ = carry
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
-            u = self.controller_u(d, u_policy)
+            u, add = self.controller_u(d, u_policy, info.get("controller"))
             targets = self.arm_targets(dist, d.time, d)
-            add = self.config.adds_observer_estimate
             cs, ctrl = self.controller.step(cs, d, command, u, targets, noise, add_estimate=add)
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
@@ -317,20 +299,36 @@ class DpcEnv(Env):
         [-1, 1], times `EnvConfig.u_scale`)."""
         return self._u_scale * jp.clip(action, -1.0, 1.0)
 
-    def controller_u(self, d, u_policy: jax.Array) -> jax.Array | None:
-        """(6,) u of this tick for the controller (world frame, about the base's COM), by
-        `config.controller`, or None for the observer's own estimate; `u_policy` from
-        `policy_u` (used by 'dpc' only; with `u_base` 'observer' the controller adds it to
-        the observer's estimate of the tick, `config.adds_observer_estimate`)."""
+    def controller_u(self, d, u_policy: jax.Array, controller: jax.Array | None = None):
+        """(u, add) of this tick for the controller: u (6,) in the world frame, about the
+        base's COM (None: the observer's own estimate of the tick), and whether the controller
+        adds its estimate to u (DPC with `u_base` 'observer'). By `config.controller`, or, given
+        `controller`, a traced () int32 `Controller.index` (each env of a batch its own:
+        `envs.controller_batch`). `u_policy` from `policy_u` (used by 'dpc' only)."""
+        if controller is not None:
+            zero = jp.zeros(ACTION_SIZE)
+            u_of = {Controller.MBC: zero, Controller.OBSERVER: zero}
+            u_of |= {Controller.DPC: self._dpc_u(d, u_policy), Controller.ORACLE: self._oracle(d)}
+            adds = {Controller.OBSERVER: True, Controller.DPC: self.config.u_base == "observer"}
+            u = jp.stack([u_of[c] for c in Controller])[controller]  # (6,) this env's row
+            return u, jp.array([adds.get(c, False) for c in Controller])[controller]
         if self.config.controller == "mbc":
-            return jp.zeros(ACTION_SIZE)
+            return jp.zeros(ACTION_SIZE), False
         if self.config.controller == "oracle":
-            return oracle_u(self.lay, d, self._com_pos(d))
+            return self._oracle(d), False
         if self.config.controller == "observer":
-            return None  # the controller's own observer estimate of this tick
+            return None, False  # the controller's own observer estimate of this tick
+        return self._dpc_u(d, u_policy), self.config.adds_observer_estimate
+
+    def _dpc_u(self, d, u_policy: jax.Array) -> jax.Array:
+        """(6,) the policy's u in the world frame (turned from the yaw frame, `u_frame`)."""
         if self.config.u_frame == "yaw":  # the policy's u turns with the heading
             return wrench_to_world(u_policy, self._yaw(d))
         return u_policy
+
+    def _oracle(self, d) -> jax.Array:
+        """(6,) the measured arm-mount wrench about the base's COM (world frame)."""
+        return oracle_u(self.lay, d, self._com_pos(d))
 
     # helpers --------------------------------------------------------------------------------
 
@@ -391,6 +389,6 @@ class DpcEnv(Env):
 
     def _privileged(self, d, dist) -> jax.Array:
         """(10,) [u_oracle (6), payload (1), ee push force (3)], see `observations.PRIVILEGED`."""
-        u = oracle_u(self.lay, d, self._com_pos(d))
+        u = self._oracle(d)
         push = self.sampler.pushes(dist, d.time, self._yaw(d)).sum(axis=0)
         return jp.concatenate([u, dist.payload.sum()[None], push])

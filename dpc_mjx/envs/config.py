@@ -101,9 +101,9 @@ class EnvConfig:
     # throw the robot around with forces no arm exerts. The oracle's own u is not clipped.
     #
     # The frame of the policy's u: 'yaw' (heading-aligned, z up; turned to the world frame, the
-    # controller's, at every tick), or 'world' (the exports written before this option existed).
-    # The policy observes nothing of the heading (s_body and u_obs are yaw-frame), so only a
-    # yaw-frame u can follow the arm's moments as the robot turns (docs/results.md, ablation).
+    # controller's, at every tick), or 'world' (the exports written before this option existed). The
+    # policy observes nothing of the heading (s_body and u_obs are yaw-frame), so only a yaw-frame u
+    # can follow the arm's moments as the robot turns (docs/results-estimator.md, ablation).
     u_frame: str = "yaw"
     # What the policy's u is added to ('dpc' only): 'zero' (the paper: u = the policy's u) or
     # 'observer' (u = the disturbance observer's estimate of each tick, world frame, + the

@@ -14,12 +14,15 @@ rollout core reads): reset keys (B, 2) -> State (B, ...), step (State (B, ...), 
 
 from __future__ import annotations
 
+import copy
+
 import jax
 from brax.envs.base import State
 from mujoco import mjx
 
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.errors import DpcError
+from dpc_mjx.physics import make_physics
 
 
 class ModelBatchEnv:
@@ -43,12 +46,12 @@ class ModelBatchEnv:
     def reset(self, keys: jax.Array) -> State:
         """Env i reset from keys[i] (B, 2) on model i."""
         self._check(keys.shape[0])
-        one = lambda m, k: self.env.with_model(m).reset(k)  # noqa: E731
+        one = lambda m, k: on_model(self.env, m).reset(k)  # noqa: E731
         return jax.vmap(one, in_axes=(self.in_axes, 0))(self.mx, keys)
 
     def step(self, state: State, action: jax.Array) -> State:
         """Env i stepped on model i with action[i] (B, 6)."""
-        one = lambda m, s, a: self.env.with_model(m).step(s, a)  # noqa: E731
+        one = lambda m, s, a: on_model(self.env, m).step(s, a)  # noqa: E731
         return jax.vmap(one, in_axes=(self.in_axes, 0, 0))(self.mx, state, action)
 
     def _check(self, batch: int) -> None:
@@ -57,6 +60,23 @@ class ModelBatchEnv:
                 f"This ModelBatchEnv holds {self.size} models but was given a batch of {batch} "
                 "envs; run exactly one env per model (repeat a model to run it more often)."
             )
+
+
+def on_model(env: DpcEnv, mx: mjx.Model) -> DpcEnv:
+    """`env` on `mx`, a model of the same structure with other continuous values (one element
+    of `robots.params.batch_arm_params`'s batch, inside `jax.vmap`). Physics, the data and the
+    end-effector Jacobians use `mx`; the controller keeps its model of the bare base, which an
+    arm's parameters do not touch. MJX engine only (the native engine steps the one compiled
+    `MjModel`)."""
+    if env.config.engine != "mjx":
+        raise DpcError(
+            f"A batch of models runs on the MJX engine only (this env has engine="
+            f"{env.config.engine!r}); build the env with engine='mjx'."
+        )
+    env = copy.copy(env)
+    env.mx = mx
+    env.physics = make_physics("mjx", env.model, mx)
+    return env
 
 
 def _none(x) -> bool:

@@ -28,6 +28,7 @@ padding. The same seed gives the same envs on any number of devices and processe
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -117,14 +118,24 @@ def scan_steps(step: Step, policy: Policy, carry: Carry, keys: jax.Array, record
 
 def make_chunk(step: Step, policy: Policy, chunk: int, record: Record | None = None):
     """jit of `(carry, key) -> (carry, records)`: `chunk` steps, one key per step split from
-    `key`."""
+    `key`. A policy that is a pytree of arrays (`policy.DpcPolicy`) is an argument of the
+    compiled program, its weights not constants in it; a plain function is part of it."""
 
-    def run(carry: Carry, key: jax.Array):
+    def chunk_steps(carry: Carry, key: jax.Array, policy: Policy):
         carry, records = scan_steps(step, policy, carry, jax.random.split(key, chunk), record)
         # several devices: the carry stays on the batch sharding it came in (one compile)
         return devices.constrain(carry, len(carry[1].ret)), records
 
-    return jax.jit(run)
+    if _is_data(policy):
+        compiled = jax.jit(chunk_steps)
+        return lambda carry, key: compiled(carry, key, policy)
+    return jax.jit(functools.partial(chunk_steps, policy=policy))
+
+
+def _is_data(policy: Policy) -> bool:
+    """Whether `policy` is a pytree whose leaves are all arrays (its weights)."""
+    leaves = jax.tree.leaves(policy)
+    return bool(leaves) and all(isinstance(x, jax.Array | np.ndarray) for x in leaves)
 
 
 def batch_fns(env: Env) -> tuple[Callable[[jax.Array], State], Step]:
@@ -152,20 +163,32 @@ def start(env: Env, batch: int, seed: int, groups: int = 1) -> tuple[Carry, jax.
         devices.check_divisible(batch, "a batch of models (grid points x episodes)")
     size = devices.padded(batch)
     keys = devices.shard(devices.pad(keys, size), size)
+
     # every leaf on the batch sharding (constant leaves, e.g. zeros, would come out replicated)
-    state = jax.jit(lambda k: devices.constrain(batch_fns(env)[0](k), size))(keys)
+    def reset_batch(keys: jax.Array) -> State:
+        return devices.constrain(batch_fns(env)[0](keys), size)
+
+    state = jax.jit(reset_batch)(keys)
     tally = devices.shard(Tally.zeros(size, getattr(env, "TASK_MEASURES", ())), size)
     return (state, tally), key
 
 
-def chunks(run_chunk: Callable, carry: Carry, key: jax.Array) -> Iterator[tuple[Carry, Any]]:
-    """Run `run_chunk` (from `make_chunk`) again and again, yielding `(carry, records as numpy)`
-    after each chunk; the caller stops by leaving the loop."""
-    while True:
-        key, k = jax.random.split(key)
-        carry, records = run_chunk(carry, k)
-        jax.block_until_ready(carry)
-        yield carry, devices.to_host(records)
+def chunks(
+    run_chunk: Callable, carry: Carry, key: jax.Array, count: int | None = None
+) -> Iterator[tuple[Carry, Any]]:
+    """Run `run_chunk` (from `make_chunk`) again and again, `count` times (None: until the caller
+    leaves the loop), yielding `(carry, records as numpy)` after each chunk. The next chunk is
+    dispatched before this one's records are copied to the host, so the device runs it while
+    the host reads (a caller that leaves early leaves one chunk computed for nothing)."""
+    key, k = jax.random.split(key)
+    pending, done = run_chunk(carry, k), 1
+    while pending is not None:
+        carry, records = pending
+        pending = None
+        if count is None or done < count:
+            key, k = jax.random.split(key)
+            pending, done = run_chunk(carry, k), done + 1
+        yield jax.block_until_ready(carry), devices.to_host(records)
 
 
 def record_episodes(
@@ -208,7 +231,7 @@ def run_episodes(
     carry, key = start(env, episodes, seed, groups)
     run_chunk = make_chunk(batch_fns(env)[1], policy, chunk)
     with bar(episodes * steps, desc, "step", progress) as pbar:
-        for _, (carry, _) in zip(range(steps // chunk), chunks(run_chunk, carry, key)):
+        for carry, _ in chunks(run_chunk, carry, key, steps // chunk):
             pbar.update(episodes * chunk)
     t = jax.tree.map(lambda x: x[:episodes], devices.to_host(carry[1]))  # padding dropped
     return {

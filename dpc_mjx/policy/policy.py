@@ -96,11 +96,25 @@ def act(policy: PolicyState, obs: jax.Array) -> jax.Array:
     return jp.tanh(logits[..., : policy.action_size])
 
 
-def dpc_policy(adapter_config: AdapterConfig, encoder: EncoderState, policy: PolicyState):
-    """(obs (B, n_in + 6) of a raw env, key) -> action (B, 6): encoder, then the actor's mode."""
+@struct.dataclass
+class DpcPolicy:
+    """The DPC policy of one arm as data, called as `(obs (B, n_in + 6) of a raw env, key) ->
+    action (B, 6)`: the arm's encoder, then the actor's mode. Its weights are leaves, so a
+    compiled rollout takes them as arguments (`rollout.make_chunk`): one program serves every
+    export of the same shapes."""
 
-    def fn(obs: jax.Array, key: jax.Array) -> jax.Array:
+    adapter_config: AdapterConfig = struct.field(pytree_node=False)
+    encoder: EncoderState
+    policy: PolicyState
+
+    def __call__(self, obs: jax.Array, key: jax.Array) -> jax.Array:
         del key
-        return act(policy, policy_observation(adapter_config, encoder, obs, policy.inputs))
+        latent_obs = policy_observation(self.adapter_config, self.encoder, obs, self.policy.inputs)
+        return act(self.policy, latent_obs)
 
-    return fn
+
+def dpc_policy(
+    adapter_config: AdapterConfig, encoder: EncoderState, policy: PolicyState
+) -> DpcPolicy:
+    """(obs (B, n_in + 6) of a raw env, key) -> action (B, 6): encoder, then the actor's mode."""
+    return DpcPolicy(adapter_config, encoder, policy)

@@ -1,8 +1,8 @@
 """Beyond the paper: start the high-level estimator from a privileged regression.
 
-The paper trains SAC from scratch. On our reaching task SAC from scratch did not beat MBC within
-1e6 env steps on a CPU (docs/results.md), while a policy regressed on the oracle's u did. So the
-actor may start from that regression, a teacher-student warm start: the teacher is the oracle
+The paper trains SAC from scratch. On our reaching task SAC from scratch did not beat MBC within 1e6
+env steps on a CPU (docs/results-estimator.md), while a policy regressed on the oracle's u did. So
+the actor may start from that regression, a teacher-student warm start: the teacher is the oracle
 (the measured mount wrench, privileged), the student sees only what DPC sees (its observation,
 `policy.POLICY_INPUTS`); SAC then trains it on the paper's reward as usual
 (`SacConfig.actor_warmup_steps` lets the critics learn its value first).

@@ -17,7 +17,8 @@ Base = str | os.PathLike | BaseSpec  # a named base, a file's path or a spec
 
 HOME_KEY = "home"
 
-# Simulation options, chosen for MJX throughput at unchanged stability (docs/decisions.md).
+# Simulation options, chosen for MJX throughput at unchanged stability (docs/decisions-engines.md,
+# "MJX").
 TIMESTEP = 0.004  # s; the policy's 50 Hz is 5 physics steps
 SOLVER_ITERATIONS = 4
 LS_ITERATIONS = 8

@@ -3,7 +3,8 @@ and correct (issue 27; `dpc-mjx base FILE [--out my_dog.json]`).
 
 `describe(spec)`: the `BaseSpec` as readable text: the trunk, the masses, each leg (place, joints,
 torque limits, foot and its radius, length, home angles), the trunk's box, the home height and
-any other actuated subtree (an arm the file carries), each with where it came from.
+any other actuated subtree (an arm the file carries), each with where it came from; a warning
+for each set of fixed links fused because MuJoCo refuses an inertia among them (`urdf_fuse`).
 
 `description(spec, json_path)`: the base's JSON file (`base_file`'s module doc) that, written at
 `json_path`, makes `read_base(json_path)` give the same legs, home height and foot radius; edit
@@ -16,6 +17,7 @@ import os
 import pathlib
 
 from dpc_mjx.robots.base_file import LEGS, BaseSpec
+from dpc_mjx.robots.urdf_fuse import describe_fused
 
 _DIGITS = 4  # decimals printed: 0.1 mm, 0.1 g, 1e-4 rad
 _SAME_RADIUS = 1e-12  # m: feet whose radii differ by less are given one radius in the JSON
@@ -66,6 +68,9 @@ def describe(spec: BaseSpec) -> str:
         ]
     if _one_radius(spec) is None:
         lines.append("note: the feet's radii differ, so the JSON leaves foot_radius out")
+    if spec.fused:
+        lines += [f"warning: {line}" for line in describe_fused(spec.fused).splitlines()]
+        lines.append("  (check the file's inertias there; the fused links keep their frames)")
     return "\n".join(lines)
 
 

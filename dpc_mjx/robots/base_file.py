@@ -20,13 +20,17 @@ its torque limits are its motors' or joints' force ranges). What is inferred:
   a sphere of FOOT_FRACTION x the leg's length at the end link's origin (Go2: no sphere);
 - torque limits: each leg joint's URDF <limit effort> (N·m), required;
 - masses and the trunk's inertia: the URDF's <inertial>s as MuJoCo reads them (an inertia that
-  breaks the triangle inequality, as ANYmal's camera links do, balanced by MuJoCo); the trunk's
-  are the rigid trunk's: its link and the links welded to it, an arm's base not counted;
+  breaks the triangle inequality, as ANYmal's camera links do, balanced by MuJoCo; a fixed link's
+  that MuJoCo refuses, ANYmal C's `hatch`, fused into the link it hangs from with a warning,
+  `robots.urdf_fuse`); the trunk's are the rigid trunk's: its link and the links welded to it,
+  an arm's base not counted;
 - the trunk's box: around its collision primitives, or, where it has only collision meshes (Go2),
   around their vertices (STL, OBJ or MSH files; the named bases' in `descriptions/meshes/<name>/`);
-- the home pose: each foot under its hip (`dpc_mjx.robots.base_home`) with the trunk's origin
-  `home_height` above the floor, by default HOME_FRACTION of the leg's length plus the feet's
-  radius (the A1: 0.625 x 0.4 m + 0.02 m = 0.27 m, `robots.a1.HOME_HEIGHT`).
+- the home pose: each foot under its hip (`robots.base_measure.solve_home`; sideways where it
+  hangs at the zero pose: under the thigh joint on Unitree's legs, outboard of it by the shank's
+  offset on ANYmal C's and Solo 12's) with the trunk's origin `home_height` above the floor, by
+  default HOME_FRACTION of the leg's length plus the feet's radius (the A1: 0.625 x 0.4 m +
+  0.02 m = 0.27 m, `robots.a1.HOME_HEIGHT`).
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import dataclasses
 import functools
 import os
 import pathlib
+import warnings
 
 import mujoco
 import numpy as np
@@ -43,8 +48,10 @@ from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import base_home
 from dpc_mjx.robots.arm_file import inside
+from dpc_mjx.robots.base_measure import check_efforts, solve_home, trunk_numbers
 from dpc_mjx.robots.base_mjcf import is_mjcf, read_tree
 from dpc_mjx.robots.base_urdf import MASSLESS, UrdfTree, read_json, subtree_urdf
+from dpc_mjx.robots.urdf_fuse import Fused, describe_fused
 
 # Name -> (file in dpc_mjx/descriptions/, the path it was copied from under the wheel's robots/):
 # `assets.URDFS`' quadrupeds (b1-z1: the B1 carrying a Z1, its `others`).
@@ -109,6 +116,7 @@ class BaseSpec:
     home_height: float  # m: the trunk's origin above the floor at home
     home_from: str  # how home_height was chosen
     others: tuple[Limb, ...] = ()  # actuated subtrees that are not legs
+    fused: tuple[Fused, ...] = ()  # fixed links whose inertia MuJoCo refuses, fused (urdf_fuse)
 
     @property
     def leg_joints(self) -> tuple[str, ...]:
@@ -218,6 +226,9 @@ def _locate(base) -> tuple[str, pathlib.Path, pathlib.Path | None, dict]:
 def _read_cached(p, _mtime, name, mesh_dir, height, leg_names, radius) -> BaseSpec:
     tree = read_tree(p)  # a UrdfTree or an MjcfTree
     trunk, skipped = tree.trunk()
+    fused = tree.fused(trunk, skipped)
+    if fused:
+        warnings.warn(f"Base {p}: {describe_fused(fused)}.", stacklevel=3)
     model = tree.compile(trunk, skipped, mesh_dir)
     data = mujoco.MjData(model)
     for j in range(model.njnt):  # the zero pose, clipped into the joints' ranges
@@ -248,10 +259,10 @@ def _read_cached(p, _mtime, name, mesh_dir, height, leg_names, radius) -> BaseSp
         home_from = "given"
     legs = []
     for place in LEGS:
-        chain, (foot, center, r, _, _) = placed[place], feet[place]
+        chain, (foot, center, r, zero, _) = placed[place], feet[place]
         hip = anchors[place][1]
-        target = np.array([hip[0], hip[1], r - height])  # m, foot centre under the hip
-        home, error = base_home.solve_leg(model, data, chain, (model.body(foot).id, center), target)
+        target = np.array([hip[0], zero[1], r - height])  # m: under the hip (module doc)
+        home, error = solve_home(model, data, chain, (model.body(foot).id, center), target)
         if error > base_home.HOME_TOL:
             raise DpcError(
                 f"Base {p}: leg {place} cannot put its foot on the floor under its hip with the "
@@ -262,11 +273,12 @@ def _read_cached(p, _mtime, name, mesh_dir, height, leg_names, radius) -> BaseSp
         legs.append(
             Leg(place, chain, efforts, foot, _t(center), r, _t(hip), lengths[place], _t(home))
         )
+    check_efforts(p, legs, float(model.body_subtreemass[model.body(trunk).id]))
     limbs = tuple(_limb(tree, model, data, chain) for chain in others)
     foot_from = {f[4] for f in feet.values()}
     return BaseSpec(
         name, p, trunk, skipped, tuple(legs), " / ".join(sorted(foot_from)),
-        *_trunk_numbers(tree, model, data, trunk, limbs), float(height), home_from, limbs,
+        *trunk_numbers(tree, model, data, trunk, limbs), float(height), home_from, limbs, fused,
     )  # fmt: skip
 
 
@@ -355,29 +367,6 @@ def _limb(tree, model, data, chain) -> Limb:
     return Limb(
         root, tree.subtree_joints(chain[0]), _t(data.xpos[b]), _t(data.xquat[b]),
         float(model.body_subtreemass[b]),
-    )  # fmt: skip
-
-
-def _trunk_numbers(tree, model, data, trunk, limbs) -> tuple:
-    """mass, trunk mass, COM, inertia, box centre, half extents, box source (BaseSpec's order).
-    The trunk's mass, COM and inertia are the rigid trunk's: its link and the links welded to
-    it, less the roots of `limbs` (an arm's base) and what is welded to them."""
-    b = model.body(trunk).id
-    limb_links = {w for limb in limbs if limb.root != trunk for w in tree.welded(limb.root)}
-    rigid = [model.body(w).id for w in tree.welded(trunk) if w not in limb_links]
-    mass, com, inertia = base_home.rigid_inertia(model, data, rigid)
-    geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == b]
-    primitives = [g for g in geoms if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH]
-    if not geoms:
-        raise DpcError(
-            f"Base {tree.path}: the trunk link {trunk!r} has no collision shape, so its box (where "
-            "arms are mounted) is unknown; give it a <collision> <box> or a mesh (MJCF: <geom>)."
-        )
-    box = base_home.geom_box(model, data, primitives or geoms)
-    return (
-        float(model.body_subtreemass[b]), mass, _t(com), tuple(_t(row) for row in inertia),
-        _t(box.mean(axis=0)), _t((box[1] - box[0]) / 2),
-        "collision primitives" if primitives else "collision meshes",
     )  # fmt: skip
 
 

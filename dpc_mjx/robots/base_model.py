@@ -32,6 +32,7 @@ from dpc_mjx.robots.base_file import LEGS, BaseSpec, base_file_path, read_base
 from dpc_mjx.robots.base_mjcf import is_mjcf, load_mjcf
 from dpc_mjx.robots.base_urdf import UrdfTree
 from dpc_mjx.robots.urdf import load_urdf, make_visual
+from dpc_mjx.robots.urdf_fuse import apply_to_spec
 
 ROOT_JOINT = "root"  # the trunk's free joint
 IMU_SITE = "imu"
@@ -93,6 +94,7 @@ def base_mjspec(base: BaseSpec) -> mujoco.MjSpec:
         spec = load_mjcf(base.path, base.trunk, base.skipped_roots, base.others)
     else:
         spec = load_urdf(base.path, drop_links=base.skipped_roots + _other_links(base))
+        apply_to_spec(spec, base.fused)  # fixed links whose inertia MuJoCo refuses, fused
     spec.modelname = base.name
     trunk = spec.body(base.trunk)
     trunk.add_freejoint(name=ROOT_JOINT)

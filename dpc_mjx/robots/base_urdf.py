@@ -17,6 +17,7 @@ import mujoco
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots.arm_xml import MESH_FORMATS, URDF_MOVABLE
 from dpc_mjx.robots.urdf import strip_meshes
+from dpc_mjx.robots.urdf_fuse import Fused, apply_to_urdf, fuse_plan
 
 MASSLESS = 1e-4  # kg: a root link lighter than this is a placeholder (Go1's base: 1e-6 kg)
 
@@ -42,6 +43,10 @@ class LinkTree:
         """The base alone, `trunk` welded at the origin, `skipped` dropped (world coordinates
         are trunk-frame coordinates); `mesh_dir`: the folder of a named base's meshes, or None."""
         raise NotImplementedError
+
+    def fused(self, trunk: str, skipped: tuple[str, ...]) -> tuple[Fused, ...]:
+        """The links `compile` fuses into the link they hang from (`robots.urdf_fuse`)."""
+        return ()
 
     def out(self, link: str) -> list[str]:
         return [n for n, j in self.joints.items() if j["parent"] == link]
@@ -168,6 +173,10 @@ class UrdfTree(LinkTree):
         """`compile_base` of this tree."""
         return compile_base(self, trunk, skipped, mesh_dir)
 
+    def fused(self, trunk: str, skipped: tuple[str, ...]) -> tuple[Fused, ...]:
+        """Its fixed links whose inertia MuJoCo refuses, fused (`urdf_fuse.fuse_plan`)."""
+        return fuse_plan(self, trunk, skipped)
+
 
 def _mass(link: ET.Element) -> float:
     mass = link.find("inertial/mass")
@@ -176,8 +185,10 @@ def _mass(link: ET.Element) -> float:
 
 def compile_base(tree: UrdfTree, trunk: str, skipped: tuple[str, ...], mesh_dir) -> mujoco.MjModel:
     """The base alone, its trunk welded at the origin: no visuals, no collision meshes but the
-    trunk's where it has no primitives, the file's inertias (none computed from shapes)."""
+    trunk's where it has no primitives, the file's inertias (none computed from shapes; fixed
+    links whose inertia MuJoCo refuses fused, `tree.fused`)."""
     root = ET.fromstring(ET.tostring(tree.root))
+    apply_to_urdf(root, tree.fused(trunk, skipped))
     for link in root.findall("link"):
         name = link.get("name")
         if name in skipped:

@@ -2,8 +2,8 @@
 
 The paper trains the adapter and the policy on one arm and transfers by a new encoder alone. A
 policy that has only seen one arm's u meets a heavy or long arm far outside what it learnt
-(docs/results.md, "DPC on the observer"). `ArmFamily` draws `count` arms that keep the run's
-arm's structure (joints, end effector, mount: so one encoder reads them all) and vary its
+(docs/results-observer.md, "DPC on the observer"). `ArmFamily` draws `count` arms that keep the
+run's arm's structure (joints, end effector, mount: so one encoder reads them all) and vary its
 continuous values, each drawn independently per arm:
 
     upper_arm_length, forearm_length   uniform (m)

@@ -26,12 +26,14 @@ HEADER = (
 )
 
 
-def bench_env(arm: str, batch: int, calls: int, task: str = DEFAULT_TASK) -> dict:
-    """{'env_sps', 'phys_sps' (env steps/s), 'env_compile', 'phys_compile' (s)} at `batch`."""
+def bench_env(arm: str, batch: int, calls: int, task: str = DEFAULT_TASK, chunk: int = 1) -> dict:
+    """{'env_sps', 'phys_sps' (env steps/s), 'env_compile', 'phys_compile' (s)} at `batch`,
+    the env `chunk` steps per call (one `lax.scan`; 1: one call per step, as physics)."""
     env = make(task, arm=arm, engine="mjx")  # beside MJX physics alone, on any device
     carry, key = rollout.start(env, batch, seed=0)
-    step = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, chunk=1)
+    step = rollout.make_chunk(jax.vmap(env.step), rollout.zero_policy, chunk=chunk)
     c_env, t_env, _ = time_calls(lambda c: step(c, key)[0], carry, calls)
+    t_env /= chunk  # s per env step
 
     servo = with_leg_servos(env.model)
     mx = sim.put_model(servo)
@@ -46,13 +48,14 @@ def bench_env(arm: str, batch: int, calls: int, task: str = DEFAULT_TASK) -> dic
     }
 
 
-def print_table(arm: str, batches, calls: int) -> list[dict]:
+def print_table(arm: str, batches, calls: int, chunk: int = 1) -> list[dict]:
     """Benchmark `arm` at each batch size, printing the markdown table row by row."""
-    print(f"arm {arm}, {calls} calls per row, device {jax.devices()[0].platform}\n")
+    device = jax.devices()[0].platform
+    print(f"arm {arm}, {calls} calls per row, {chunk} env steps per env call, device {device}\n")
     print(HEADER, flush=True)
     rows = []
     for batch in batches:
-        rows.append(bench_env(arm, batch, calls))
+        rows.append(bench_env(arm, batch, calls, chunk=chunk))
         print(table_row(batch, rows[-1]), flush=True)
     return rows
 

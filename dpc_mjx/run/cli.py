@@ -34,6 +34,7 @@ import argparse
 import pathlib
 import sys
 
+from dpc_mjx import compile_cache
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 from dpc_mjx.run.cli_tools import (
@@ -61,14 +62,22 @@ def _run_config(args: argparse.Namespace):
         named["eval_episodes"] = args.episodes
     if getattr(args, "base", None):
         named["env.base"] = args.base
-    device = getattr(args, "device", "cpu")
-    if device == "auto":
-        import jax  # noqa: PLC0415 (jax only for --device auto)
-
-        device = jax.default_backend()
-        print(f"device: {device} ({jax.device_count()} x {jax.devices()[0].device_kind})")
-    base = recipe(getattr(args, "recipe", "default"), device)
+    base = recipe(getattr(args, "recipe", "default"), _device(args))
     return base.replace(**named, **parse_sets(args.set))
+
+
+def _device(args: argparse.Namespace) -> str:
+    """The device preset of `--device` ('auto': the backend JAX runs on), printed."""
+    from dpc_mjx.run.config import preset_name  # noqa: PLC0415 (subcommand handler)
+
+    preset = preset_name(getattr(args, "device", "auto"))
+    import jax  # noqa: PLC0415 (after the preset's name: jax starts its backend here)
+
+    print(
+        f"device: {jax.default_backend()} ({jax.device_count()} x "
+        f"{jax.devices()[0].device_kind}), {preset} sizes (run.config.DEVICE_PRESETS)"
+    )
+    return preset
 
 
 def _train(args: argparse.Namespace) -> None:
@@ -100,19 +109,29 @@ def _transfer(args: argparse.Namespace) -> None:
 
 
 def _eval(args: argparse.Namespace) -> None:
-    from dpc_mjx.io.shipped import shipped_for  # noqa: PLC0415 (subcommand handler)
-    from dpc_mjx.physics import AUTO, resolve_engine  # noqa: PLC0415
+    from dpc_mjx.io import load  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.io.shipped import engine_of, shipped_for  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.physics import resolve_engine  # noqa: PLC0415
     from dpc_mjx.run.pipeline import evaluate_export  # noqa: PLC0415 (subcommand handler)
 
     env = _env_options(args)
-    prefix = "native-" if resolve_engine(env.get("engine", AUTO)) == "native" else ""
     export = args.export or shipped_for(args.base)
-    evaluate_export(export, **_cells(args, prefix), env=env)
+    engine = env.get("engine") or engine_of(load(export))  # the export's, where it runs here
+    prefix = "native-" if resolve_engine(engine) == "native" else ""
+    evaluate_export(export, **_cells(args, prefix), **_eval_sizes(args), env=env)
+
+
+def _eval_sizes(args: argparse.Namespace) -> dict:
+    """Episodes (unless `--episodes`) and chunk length of the device's preset (`--device`)."""
+    from dpc_mjx.run.config import DEVICE_PRESETS, RunConfig  # noqa: PLC0415 (handler)
+
+    sized = RunConfig().replace(**DEVICE_PRESETS[_device(args)])
+    return {"episodes": args.episodes or sized.eval_episodes, "chunk": sized.eval_chunk}
 
 
 def _cells(args: argparse.Namespace, csv_prefix: str) -> dict:
     """The keyword arguments that `eval` and `sim2sim` share (`eval_options`), CSV defaulted."""
-    names = ("arms", "controllers", "task", "episodes", "steps", "seed", "out")
+    names = ("arms", "controllers", "task", "steps", "seed", "out")
     return given(args, names) | {"csv": args.csv or _default_csv(args, csv_prefix)}
 
 
@@ -131,7 +150,8 @@ def _sim2sim(args: argparse.Namespace) -> None:
     from dpc_mjx.run.sim2sim import sim2sim  # noqa: PLC0415 (subcommand handler)
 
     export = args.export or shipped_for(args.base)
-    sim2sim(export, **_cells(args, "sim2sim-"), env=env_options(args))
+    cells = _cells(args, "sim2sim-") | given(args, ("episodes",))
+    sim2sim(export, **cells, env=env_options(args))
 
 
 def _sweep(args: argparse.Namespace) -> None:
@@ -202,7 +222,7 @@ def _training_commands(sub) -> None:
         "--arm",
         required=True,
         help="the new arm: a variant (so100), your arm's .urdf or MJCF .xml file, or a .json arm "
-        "description (README: Your own arm)",
+        "description (docs/own-arm.md)",
     )
     p.add_argument("--samples", type=int, default=30_000)
     p.add_argument("--task", help=TASK_HELP)
@@ -224,13 +244,7 @@ def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
         help="named settings the --set options change: default (the oracle regression), "
         "paper (SAC from a random actor, asymmetric critic)",
     )
-    p.add_argument(
-        "--device",
-        choices=["auto", "cpu", "gpu"],
-        default="auto",
-        help="settings preset for the accelerator (default auto: the one JAX runs on; "
-        "docs/benchmarks.md, run.config.DEVICE_PRESETS)",
-    )
+    _device_option(p)
     p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
     p.add_argument("--logdir", help="TensorBoard events: LOGDIR/<run> (default RUN/tensorboard)")
     if resume:
@@ -241,6 +255,16 @@ def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
         p.add_argument("--resume", action="store_true", help="continue a killed run")
 
 
+def _device_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "gpu"],
+        default="auto",
+        help="sizes for the accelerator: envs, episodes, chunk length (default auto: the one JAX "
+        "runs on; run.config.DEVICE_PRESETS)",
+    )
+
+
 def _evaluation_commands(sub) -> None:
     """eval, sim2sim, sweep."""
     p = sub.add_parser("eval", help="MBC / observer / DPC / oracle, 95%% intervals")
@@ -248,9 +272,11 @@ def _evaluation_commands(sub) -> None:
     p.add_argument(
         "--engine",
         choices=["mjx", "native"],
-        help="physics: native MuJoCo C (the default on a CPU: faster there, docs/benchmarks.md) "
-        "or mjx (the default on an accelerator); the same results up to the engines' differences",
+        help="physics: native MuJoCo C (the default on a CPU: faster there, "
+        "docs/benchmarks-cpu.md) or mjx (the default on an accelerator); the same results up "
+        "to the engines' differences",
     )
+    _device_option(p)
     p.set_defaults(handler=_eval)
 
     p = sub.add_parser("sim2sim", help="the eval cells in MJX and in native MuJoCo, side by side")
@@ -278,7 +304,8 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--arms", nargs="+", help=arms)
     p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
     p.add_argument("--task", help=TASK_HELP)
-    p.add_argument("--episodes", type=int, default=64)
+    episodes = "per controller (default: 64 on a CPU, 1024 on a GPU: --device of eval)"
+    p.add_argument("--episodes", type=int, help=episodes)
     p.add_argument(
         "--steps",
         type=int,
@@ -306,6 +333,7 @@ def _join_processes(args: argparse.Namespace) -> None:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
+        compile_cache.enable()  # programs compiled once (dpc_mjx/compile_cache.py)
         _join_processes(args)
         args.handler(args)
     except DpcError as e:

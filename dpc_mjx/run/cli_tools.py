@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
@@ -92,7 +93,7 @@ def _onnx(args: argparse.Namespace) -> None:
 def _bench(args: argparse.Namespace) -> None:
     from dpc_mjx.run.bench import print_table  # noqa: PLC0415 (subcommand handler)
 
-    print_table(args.arm, args.batches, args.calls)
+    print_table(args.arm, args.batches, args.calls, args.chunk)
 
 
 def _variants(args: argparse.Namespace) -> None:
@@ -114,7 +115,9 @@ def _base(args: argparse.Namespace) -> None:
     from dpc_mjx.robots.base_file import read_base  # noqa: PLC0415 (subcommand handler)
     from dpc_mjx.serialization import write_json  # noqa: PLC0415 (subcommand handler)
 
-    spec = read_base(args.file)
+    with warnings.catch_warnings():  # a fusion's warning: describe prints it among the facts
+        warnings.simplefilter("ignore", UserWarning)
+        spec = read_base(args.file)
     print(describe(spec))
     if args.out:
         write_json(args.out, description(spec, args.out))
@@ -138,6 +141,7 @@ def tool_commands(sub) -> None:
     p.add_argument("--arm", default="regular")
     p.add_argument("--batches", type=int, nargs="+", default=[1, 64, 256])
     p.add_argument("--calls", type=int, default=20)
+    p.add_argument("--chunk", type=int, default=1, help="env steps per env call (lax.scan)")
     p.set_defaults(handler=_bench)
 
     p = sub.add_parser("render", help="a video (MP4 or GIF) of an episode, headless")

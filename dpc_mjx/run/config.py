@@ -1,7 +1,7 @@
 """The configuration of a whole run (`RunConfig`) and the run folder's config file.
 
-The defaults are the recipe of the shipped `regular` run (docs/results.md). Hyperparameters are
-overridden by dotted name (`RunConfig().replace(**{"sac.num_envs": 32})`, or
+The defaults are the recipe of the shipped `regular` run (docs/results-estimator.md).
+Hyperparameters are overridden by dotted name (`RunConfig().replace(**{"sac.num_envs": 32})`, or
 `dpc-mjx train --set sac.num_envs=32`); the env's own options are the task config's fields
 (`env.<field>`), SAC's are `SacConfig`'s and the adapter's `AdapterConfig`'s.
 
@@ -32,7 +32,7 @@ ACTOR_INITS = ("random", "oracle_regression")
 _SUB_SEEDS = ("adapter.seed", "sac.seed")  # set from RunConfig.seed, never on their own
 
 
-# The SAC settings of the shipped run (docs/results.md, "DPC on the reaching task"): a longer run
+# The SAC settings of the shipped run (docs/history/sac-export-v5.md): a longer run
 # than SacConfig's default, larger batches, a shorter horizon (a push acts within ~0.2-1 s), a
 # low starting temperature and a slow actor, so that the oracle-regressed actor is refined rather
 # than overwritten; the critics learn alone for the first 20,000 gradient steps.
@@ -64,34 +64,51 @@ RECIPES: dict[str, dict[str, Any]] = {
 }
 
 
-# Device presets: dotted overrides for the accelerator JAX runs on (`dpc-mjx train --device`,
-# default: `jax.default_backend()`), applied after the recipe and before `--set`. The CPU preset
-# is the shipped recipe. On a GPU, a batch of envs costs about what one env does up to thousands,
-# so SAC steps 4x the envs per actor step with 4x the gradient steps (the update-to-data ratio,
-# 1/4, and so the learning rule per env step stay those of the recipe; an epoch holds 4x the env
-# steps so that it still runs 256 actor steps) and evaluates on 128 episodes. The adapter's data
-# keeps 64 envs: 100,000 samples over more envs would cut each env's trajectory short of an
-# episode (1,000 steps), and the samples would crowd near the resets.
+# Device presets: dotted overrides for the accelerator JAX runs on (`--device`, default auto:
+# `jax.default_backend()`), applied after the recipe and before `--set`. The CPU preset is the
+# shipped recipe. On a GPU a batch of envs costs about what one env does up to thousands (18-25 ms
+# an env step on an H200 at any batch up to a few thousand: docs/benchmarks.md, "On a GPU"), so:
+# - the adapter's data come from 2,048 envs, each env's first episode cut short after a random
+#   number of steps and the first 1,000 steps' rows dropped (`data_burn_in`: staggered starts),
+#   so that 100,000 samples spread over the episodes' whole length as 64 envs' 1,560 steps do,
+#   not over 49 steps after each reset;
+# - the evaluation runs 1,024 episodes per controller in chunks of a whole 20 s episode;
+# - SAC steps 1,024 envs with the recipe's rule held: one gradient step per 4 env steps
+#   (`sac.grad_updates_per_step` = `sac.num_envs` / 4, the update-to-data ratio of both recipes),
+#   the same batch, and epochs of 256 actor steps; it evaluates on 128 episodes.
 DEVICE_PRESETS: dict[str, dict[str, Any]] = {
     "cpu": {},
     "gpu": {
-        "sac.num_envs": 256,
-        "sac.grad_updates_per_step": 64,
-        "sac.epoch_steps": 65_536,
+        "data_envs": 2048,
+        "data_burn_in": 1000,
+        "eval_episodes": 1024,
+        "eval_chunk": 1000,
+        "sac.num_envs": 1024,
+        "sac.grad_updates_per_step": 256,
+        "sac.epoch_steps": 262_144,
         "sac.eval_envs": 128,
     },
 }
 
 
-def recipe(name: str, device: str = "cpu") -> RunConfig:
-    """`RunConfig()` with the overrides of the named recipe (`RECIPES`), then those of the
-    device preset `device` ('cpu' or 'gpu', `DEVICE_PRESETS`; 'tpu' takes the GPU's)."""
-    if name not in RECIPES:
-        raise DpcError(f"Unknown recipe {name!r}; the recipes are {sorted(RECIPES)}.")
-    preset = "gpu" if device == "tpu" else device
+def preset_name(device: str) -> str:
+    """The preset of a device name ('auto': the backend JAX runs on; 'tpu' takes the GPU's)."""
+    if device == "auto":
+        import jax  # noqa: PLC0415 (jax only for --device auto)
+
+        device = jax.default_backend()
+    preset = "gpu" if device in ("gpu", "tpu", "cuda", "rocm") else device
     if preset not in DEVICE_PRESETS:
         raise DpcError(f"Unknown device preset {device!r}; choose from {sorted(DEVICE_PRESETS)}.")
-    return RunConfig().replace(**{**RECIPES[name], **DEVICE_PRESETS[preset]})
+    return preset
+
+
+def recipe(name: str, device: str = "cpu") -> RunConfig:
+    """`RunConfig()` with the overrides of the named recipe (`RECIPES`), then those of the
+    device preset of `device` ('auto', 'cpu' or 'gpu', `preset_name`, `DEVICE_PRESETS`)."""
+    if name not in RECIPES:
+        raise DpcError(f"Unknown recipe {name!r}; the recipes are {sorted(RECIPES)}.")
+    return RunConfig().replace(**{**RECIPES[name], **DEVICE_PRESETS[preset_name(device)]})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,9 +127,13 @@ class RunConfig:
     env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
     samples: int = 100_000  # random-motion transitions for the adapter
     data_envs: int = 64
+    # env steps run before the adapter's samples are kept, each env's first episode cut short
+    # after a random number of steps up to it (staggered starts; `adapter.collect`): 0 on a CPU
+    data_burn_in: int = 0
     adapter: adapter_lib.AdapterConfig = adapter_lib.AdapterConfig()
     # No SAC stage by default (num_timesteps=0: the policy is the oracle regression, actor_init):
-    # in the SAC runs v4 and v5 the selected actor was the regressed one (docs/results.md);
+    # in the SAC runs v4 and v5 the selected actor was the regressed one
+    # (docs/results-estimator.md);
     # `--set sac.num_timesteps=1000000` runs SAC with those runs' settings (TRAINED_SAC)
     sac: sac.SacConfig = dataclasses.replace(TRAINED_SAC, num_timesteps=0)
     eval_episodes: int = 64
@@ -120,12 +141,13 @@ class RunConfig:
     # pushing 500: `EnvConfig.episode_length`, as `dpc-mjx eval`)
     eval_steps: int | None = None
     eval_controllers: tuple[str, ...] = tuple(Controller)  # mbc, observer, dpc, oracle
+    eval_chunk: int = 50  # env steps per compiled evaluation chunk at most (`run.eval.evaluate`)
     # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
     # the oracle's u over the adapter's samples, `policy.regression`; then SAC as usual)
     actor_init: str = "oracle_regression"
     # What the policy observes (`policy.policy.POLICY_INPUTS`): "paper" [s_body, z], or "observer"
     # [s_body, z, u_obs], the disturbance observer's estimate too (better with exact sensors,
-    # worse with the robot's: docs/results.md, the ablation)
+    # worse with the robot's: docs/results-estimator.md, the ablation)
     policy_input: str = "paper"
     # DAgger after the regression: rounds of `dagger_samples` states visited by the current
     # actor, labelled with the oracle's u, added to the data before regressing again
@@ -172,10 +194,11 @@ class RunConfig:
             raise DpcError(
                 "dagger_rounds needs actor_init='oracle_regression' (the oracle labels)."
             )
-        for name in ("samples", "data_envs", "eval_episodes", "eval_steps", "dagger_samples"):
-            v = getattr(self, name)
-            if (v is not None or name != "eval_steps") and (not isinstance(v, int) or v < 1):
-                raise DpcError(f"RunConfig.{name} must be an int >= 1, got {v!r}.")
+        positive = ("samples", "data_envs", "eval_episodes", "eval_steps", "eval_chunk")
+        for name in (*positive, "dagger_samples", "data_burn_in"):
+            v, least = getattr(self, name), int(name != "data_burn_in")
+            if (v is not None or name != "eval_steps") and (not isinstance(v, int) or v < least):
+                raise DpcError(f"RunConfig.{name} must be an int >= {least}, got {v!r}.")
         self.adapter.validate()
         self.sac.validate()
         self._validate_family()

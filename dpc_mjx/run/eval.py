@@ -21,7 +21,6 @@ own encoder).
 from __future__ import annotations
 
 import collections
-import csv
 import dataclasses
 import os
 import pathlib
@@ -34,15 +33,18 @@ import jax
 import numpy as np
 
 from dpc_mjx.controllers import Controller
-from dpc_mjx.envs.registry import DEFAULT_TASK, make, resolve_arm
-from dpc_mjx.envs.rollout import Policy, run_episodes
+from dpc_mjx.envs.controller_batch import ControllerBatch
+from dpc_mjx.envs.registry import DEFAULT_TASK, get_config, make, resolve_arm
+from dpc_mjx.envs.rollout import Policy, run_episodes, zero_policy
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import AUTO, ENGINE_NAMES, resolve_engine
 from dpc_mjx.robots.variants import Arm, arm_name
+from dpc_mjx.run.report import write_episodes_csv
 from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 from dpc_mjx.writer import is_writer
 
 CONTROLLERS = tuple(Controller)  # mbc, observer, dpc, oracle: the tables' order
+CHUNK = 50  # env steps per compiled chunk at most (`rollout.run_episodes`); more on a GPU
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +65,7 @@ class CellResult:
     vy_rmse: float  # m/s
     yaw_rate_rmse: float  # rad/s
     nan_resets: int
-    seconds: float  # wall time, compile included
+    seconds: float  # wall time, compile included: the arm's batch of controllers' over their count
     seed: int = 0  # episode i is reset from the i-th key of `seed` (`rollout.start`)
     pos_rmse: float = 0.0  # m, trunk (x, y) vs the desired path (the command integrated)
     ee_rmse: float = 0.0  # m, end effector vs its servo targets (first order, `DpcEnv`)
@@ -84,20 +86,32 @@ class CellResult:
 def evaluate_env(
     env,
     arm: str,
-    controller: str,
+    controllers: list[str],
     episodes: int,
     steps: int,
     seed: int,
     policy: Policy | None,
     progress: bool = True,
-) -> CellResult:
-    """Run one cell on a built env (its config fixes the controller; `policy` for 'dpc')."""
+    chunk: int = CHUNK,
+) -> list[CellResult]:
+    """The cells of `controllers` on a built env (its config's controller 'dpc'; `policy` for
+    'dpc'), every controller's episodes in one batch through one compiled reset and one chunk
+    (`envs.controller_batch`); each cell's `seconds` is the batch's wall time over k."""
     t0 = time.perf_counter()
-    kw = {} if policy is None else {"policy": policy}
-    desc = f"{arm} {controller}"
-    r = run_episodes(env, episodes, steps, seed=seed, progress=progress, desc=desc, **kw)
+    batch = ControllerBatch(env, controllers)
+    k = len(batch.controllers)
+    names = [c.value for c in batch.controllers]  # plain strings in tables and CSVs
+    r = run_episodes(
+        batch, k * episodes, steps, seed, policy or zero_policy, chunk, progress,
+        f"{arm} {'/'.join(names)}", groups=k,
+    )  # fmt: skip
+    seconds = (time.perf_counter() - t0) / k
     measures = getattr(env, "TASK_MEASURES", ())
-    return cell_result(arm, controller, r, steps, seed, time.perf_counter() - t0, measures)
+    group = lambda g: {key: v[g * episodes : (g + 1) * episodes] for key, v in r.items()}  # noqa: E731
+    return [
+        cell_result(arm, name, group(g), steps, seed, seconds, measures)
+        for g, name in enumerate(names)
+    ]
 
 
 def cell_result(
@@ -156,14 +170,16 @@ def evaluate(
     on_result: Callable[[CellResult], None] | None = None,
     progress: bool = True,
     workers: int | None = None,
+    chunk: int = CHUNK,
 ) -> list[CellResult]:
     """Every (arm, controller) cell of the protocol on `task`; an arm is a variant name or an arm
     (`robots.UrdfArm`, ...), its cells labelled `robots.arm_name(arm)`; `dpc_policy_for(name)`
     gives the DPC policy of an arm (its encoder + the shared actor), needed for 'dpc'; `steps`
-    per episode default to the task's episode length (`EnvConfig.episode_length`). `workers`
-    cells run at once, each in a thread of its own (default `cell_workers`), so one compiles
-    while another runs; the results, and `on_result`'s calls, come in cell order and are those
-    of one cell at a time."""
+    per episode default to the task's episode length (`EnvConfig.episode_length`). An arm's
+    controllers run as one batch, one compiled program (`evaluate_env`), in chunks of at most
+    `chunk` env steps; `workers` arms run at once, each in a thread of its own (default
+    `cell_workers`), so one compiles while another runs; the results, and `on_result`'s calls,
+    come in cell order and are those of one arm at a time."""
     controllers = Controller.parse_all(controllers)
     if Controller.DPC in controllers and dpc_policy_for is None:
         raise DpcError("Evaluating 'dpc' needs a trained policy: pass dpc_policy_for (or --run).")
@@ -174,31 +190,33 @@ def evaluate(
     dpc = Controller.DPC in controllers
     policies = {arm_name(arm): dpc_policy_for(arm_name(arm)) for arm in arms} if dpc else {}
 
-    def cell(arm: str | Arm, controller: Controller) -> CellResult:
-        env = make(task, arm=arm, controller=controller, **(overrides or {}))
-        policy = policies[arm_name(arm)] if controller == Controller.DPC else None
+    def cells(arm: str | Arm) -> list[CellResult]:
+        env = make(task, arm=arm, controller=Controller.DPC, **(overrides or {}))
         n_steps = env.config.episode_length if steps is None else steps
-        label = controller.value  # the cell's controller, a plain string in tables and CSVs
-        return evaluate_env(env, arm_name(arm), label, episodes, n_steps, seed, policy, progress)
+        policy = policies.get(arm_name(arm))
+        return evaluate_env(
+            env, arm_name(arm), controllers, episodes, n_steps, seed, policy, progress, chunk
+        )
 
-    jobs = iter([(arm, controller) for arm in arms for controller in controllers])
+    jobs = iter(arms)
     results, n = [], workers or cell_workers(resolve_engine((overrides or {}).get("engine", AUTO)))
     with ThreadPoolExecutor(n) as pool:
-        # a window of `workers` cells in flight, the oldest awaited first: a failed cell raises
-        # once the cells in flight end, and no later cell starts
-        flight = collections.deque(pool.submit(cell, *j) for j in islice(jobs, n))
+        # a window of `workers` arms in flight, the oldest awaited first: a failed arm raises
+        # once the arms in flight end, and no later arm starts
+        flight = collections.deque(pool.submit(cells, arm) for arm in islice(jobs, n))
         while flight:
-            results.append(flight.popleft().result())
-            if on_result is not None:
-                on_result(results[-1])
-            flight.extend(pool.submit(cell, *j) for j in islice(jobs, 1))
+            for cell in flight.popleft().result():
+                results.append(cell)
+                if on_result is not None:
+                    on_result(cell)
+            flight.extend(pool.submit(cells, arm) for arm in islice(jobs, 1))
     return results
 
 
 def cell_workers(engine: str) -> int:
     """Cells evaluated at once by default: 2 for the native engine where JAX runs on the CPU of
     one process with two or more cores (a cell's XLA compile, which holds one core, overlaps
-    another cell's run: docs/benchmarks.md, "Evaluation cells two at a time"), else 1 (MJX,
+    another cell's run: docs/benchmarks-cpu.md, "Evaluation cells two at a time"), else 1 (MJX,
     whose cells compile longer and in more memory, measured 4.2 GB for a train's two at once
     against 3.0 GB one at a time; an accelerator; several processes, whose collectives must meet
     in the same order)."""
@@ -234,71 +252,6 @@ def task_row(c: CellResult) -> str:
     """A markdown row under `TASK_HEADER`."""
     measures = "; ".join(f"{k} {m:.3f} [{lo:.3f}, {hi:.3f}]" for k, (m, lo, hi) in c.task.items())
     return f"| {c.arm} | {c.controller} | {c.pos_rmse:.3f} | {c.ee_rmse:.4f} | {measures or '-'} |"
-
-
-# per-episode CSV columns; a task's measures (`DpcEnv.TASK_MEASURES`) follow them
-EPISODE_COLUMNS = (
-    *("arm", "controller", "seed", "episode", "fell", "fall_step", "nan_reset", "length"),
-    *("return", "roll_rms", "pitch_rms", "vx_rmse", "vy_rmse", "yaw_rate_rmse"),
-    *("pos_rmse", "ee_rmse"),
-)
-
-
-def episode_rows(c: CellResult) -> list[dict]:
-    """One row per episode of a cell (`EPISODE_COLUMNS`): `episode` i was reset from the i-th
-    key of `seed`, so rows with the same (seed, episode) are the same episode under every
-    controller (pair them); `fall_step` is the env step (1-based) of the fall, empty if none;
-    RMS errors (rad, m/s, rad/s, m) over the steps before the episode's end; then the task's
-    measures at the episode's end."""
-    r = c.per_episode
-    measured = np.maximum(r["measured"], 1.0)
-
-    def rms(key: str, i: int) -> float:
-        return float(np.sqrt(r[key][i] / measured[i]))
-
-    return [
-        {
-            "arm": c.arm,
-            "controller": c.controller,
-            "seed": c.seed,
-            "episode": i,
-            "fell": int(r["fell"][i]),
-            "fall_step": int(r["length"][i]) if r["fell"][i] else "",
-            "nan_reset": int(r["nan"][i]),
-            "length": int(r["length"][i]),
-            "return": float(r["return"][i]),
-            "roll_rms": rms("roll_sq", i),
-            "pitch_rms": rms("pitch_sq", i),
-            "vx_rmse": rms("vx_sq_err", i),
-            "vy_rmse": rms("vy_sq_err", i),
-            "yaw_rate_rmse": rms("yaw_rate_sq_err", i),
-            "pos_rmse": rms("pos_sq_err", i),
-            "ee_rmse": rms("ee_sq_err", i),
-            **{k: float(r[k][i]) for k in c.task},
-        }
-        for i in range(len(r["return"]))
-    ]
-
-
-def write_episodes_csv(
-    path: str | pathlib.Path, cells: list[CellResult], engines: list[str] | None = None
-) -> pathlib.Path:
-    """Every episode of `cells` as a CSV row (`episode_rows`), to re-analyse, pair or bootstrap a
-    table without re-running it; with `engines` (one per cell), an `engine` column first.
-    Written by process 0 only (`writer.is_writer`)."""
-    path = pathlib.Path(path)
-    if not is_writer():
-        return path
-    path.parent.mkdir(parents=True, exist_ok=True)
-    measures = dict.fromkeys(k for c in cells for k in c.task)
-    columns = ["engine"] * (engines is not None) + [*EPISODE_COLUMNS, *measures]
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns, restval="")
-        w.writeheader()
-        for i, c in enumerate(cells):
-            label = {} if engines is None else {"engine": engines[i]}
-            w.writerows({**label, **row} for row in episode_rows(c))
-    return path
 
 
 PAIRED_HEADER = (
@@ -358,9 +311,14 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
 
 def evaluate_table(arms, controllers, *, out=None, csv=None, **kwargs) -> list[CellResult]:
     """`evaluate`, printing the table row by row, writing it to `out` (markdown) and every
-    episode to `csv` (`write_episodes_csv`). A line above the table names the engine."""
+    episode to `csv` (`write_episodes_csv`). A line above the table names the engine, the
+    episodes per cell and their seed."""
     engine = resolve_engine((kwargs.get("overrides") or {}).get("engine", AUTO))
-    preface = [f"physics: {ENGINE_NAMES[engine]} (engine={engine!r})", ""]
+    task, overrides = kwargs.get("task", DEFAULT_TASK), kwargs.get("overrides") or {}
+    steps = kwargs.get("steps") or get_config(task, **overrides).episode_length
+    size = f"{kwargs.get('episodes', 64)} episodes of {steps} env steps per cell"
+    preface = [f"physics: {ENGINE_NAMES[engine]} (engine={engine!r}); {size}, "
+               f"seed {kwargs.get('seed', 0)}", ""]  # fmt: skip
     print("\n".join([*preface, TABLE_HEADER]), flush=True)
 
     def show(cell: CellResult) -> None:

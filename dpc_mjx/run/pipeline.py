@@ -1,7 +1,7 @@
 """A whole DPC run as one function: data -> adapter -> policy (oracle regression, then SAC if
 asked) -> export -> evaluation.
 
-    config = RunConfig(arm="regular")        # the shipped recipe (docs/results.md)
+    config = RunConfig(arm="regular")        # the shipped recipe (docs/results-estimator.md)
     summary = train_and_evaluate(config, "runs/regular")
     config.replace(**{"sac.num_timesteps": 500_000})   # with a SAC stage after the regression
 
@@ -43,7 +43,7 @@ from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run import plots
 from dpc_mjx.run.config import RunConfig, read_run_config, start_run
-from dpc_mjx.run.eval import CONTROLLERS, CellResult, evaluate_table
+from dpc_mjx.run.eval import CHUNK, CONTROLLERS, CellResult, evaluate_table
 from dpc_mjx.run.tensorboard import NO_EVENTS, RunEvents, run_events
 from dpc_mjx.run.training_arms import collect_training_data
 from dpc_mjx.serialization import write_json
@@ -79,8 +79,7 @@ def train_and_evaluate(
     )
     export_dir = export(config, run_dir, adapter, result)
     t0 = time.perf_counter()
-    cells = evaluate_run(config, run_dir, export_dir)
-    events.eval(cells)
+    events.eval(cells := evaluate_run(config, run_dir, export_dir))
     timings["eval_seconds"] = time.perf_counter() - t0
     summary = {
         "config": config.to_json(),
@@ -165,9 +164,7 @@ def train_policy(
     folder = run_dir / "sac"
     has_checkpoint = (folder / "checkpoint.json").exists()
     if sac_config.num_timesteps == 0:
-        print(
-            "sac: no SAC stage (sac.num_timesteps=0): the policy is the starting actor", flush=True
-        )
+        print("sac: no SAC stage (sac.num_timesteps=0): the policy is the first actor", flush=True)
     else:
         print(
             f"sac: {'resuming' if resume and has_checkpoint else 'training'} to "
@@ -313,6 +310,7 @@ def evaluate_run(config: RunConfig, run_dir: pathlib.Path, export_dir) -> list[C
         overrides=config.env_overrides,
         out=run_dir / "eval.md",
         csv=run_dir / EPISODES_FILE,
+        chunk=config.eval_chunk,
     )
 
 
@@ -377,13 +375,14 @@ def evaluate_export(
     out: str | pathlib.Path | None = None,
     csv: str | pathlib.Path | None = None,
     env: dict | None = None,
+    chunk: int = CHUNK,
 ) -> list[CellResult]:
     """The evaluation protocol for the arms of an export (default: the arm its policy was trained
     on, its first encoder; transferred encoders are added after it; an arm is an encoder's name,
     a variant, or an arm file or description as for `transfer_arm`),
     under the env options it was trained with and `env` over them (e.g. exact sensors), for
     `steps` per episode (default: the task's episode length); prints the table (and writes it
-    to `out`, and one row per episode to `csv`)."""
+    to `out`, and one row per episode to `csv`), in compiled chunks of at most `chunk` steps."""
     artefacts, arms, overrides = export_cells(export_dir, arms, controllers, task, env)
     return evaluate_table(
         arms,
@@ -396,4 +395,5 @@ def evaluate_export(
         overrides=overrides,
         out=out,
         csv=csv,
+        chunk=chunk,
     )

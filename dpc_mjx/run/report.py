@@ -2,8 +2,8 @@
 episodes, and the markdown cells of the tables (`experiments/table_one.py`, `paired_csv.py`,
 `transfer_curve.py`).
 
-A per-episode CSV (`dpc-mjx eval --csv`, `run.eval.write_episodes_csv`) has one row per episode
-and controller, columns `run.eval.EPISODE_COLUMNS` then the task's measures: rows with the same
+A per-episode CSV (`dpc-mjx eval --csv`, `write_episodes_csv`) has one row per episode and
+controller, columns `EPISODE_COLUMNS` then the task's measures: rows with the same
 (arm, seed, episode) are the same episode (initial pose, disturbances) under each controller, so
 two controllers' rows pair. Intervals are 95% (`dpc_mjx.stats`).
 """
@@ -17,11 +17,77 @@ import numpy as np
 
 from dpc_mjx.errors import DpcError
 from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci
+from dpc_mjx.writer import is_writer
 
-# the columns a report reads (a subset of `run.eval.EPISODE_COLUMNS`)
+# the columns a report reads (a subset of `EPISODE_COLUMNS`)
 KEY_COLUMNS = ("arm", "controller", "seed", "episode", "fell", "return")
 # columns that are not numbers (`fall_step` is empty when the episode did not fall)
 TEXT_COLUMNS = ("engine", "arm", "controller", "fall_step")
+
+
+# per-episode CSV columns; a task's measures (`DpcEnv.TASK_MEASURES`) follow them
+EPISODE_COLUMNS = (
+    *("arm", "controller", "seed", "episode", "fell", "fall_step", "nan_reset", "length"),
+    *("return", "roll_rms", "pitch_rms", "vx_rmse", "vy_rmse", "yaw_rate_rmse"),
+    *("pos_rmse", "ee_rmse"),
+)
+
+
+def episode_rows(c) -> list[dict]:
+    """One row per episode of a cell `c` (a `run.eval.CellResult`; `EPISODE_COLUMNS`): `episode`
+    i was reset from the i-th key of `seed`, so rows with the same (seed, episode) are the same
+    episode under every controller (pair them); `fall_step` is the env step (1-based) of the
+    fall, empty if none; RMS errors (rad, m/s, rad/s, m) over the steps before the episode's
+    end; then the task's measures at the episode's end."""
+    r = c.per_episode
+    measured = np.maximum(r["measured"], 1.0)
+
+    def rms(key: str, i: int) -> float:
+        return float(np.sqrt(r[key][i] / measured[i]))
+
+    return [
+        {
+            "arm": c.arm,
+            "controller": c.controller,
+            "seed": c.seed,
+            "episode": i,
+            "fell": int(r["fell"][i]),
+            "fall_step": int(r["length"][i]) if r["fell"][i] else "",
+            "nan_reset": int(r["nan"][i]),
+            "length": int(r["length"][i]),
+            "return": float(r["return"][i]),
+            "roll_rms": rms("roll_sq", i),
+            "pitch_rms": rms("pitch_sq", i),
+            "vx_rmse": rms("vx_sq_err", i),
+            "vy_rmse": rms("vy_sq_err", i),
+            "yaw_rate_rmse": rms("yaw_rate_sq_err", i),
+            "pos_rmse": rms("pos_sq_err", i),
+            "ee_rmse": rms("ee_sq_err", i),
+            **{k: float(r[k][i]) for k in c.task},
+        }
+        for i in range(len(r["return"]))
+    ]
+
+
+def write_episodes_csv(
+    path: str | pathlib.Path, cells: list, engines: list[str] | None = None
+) -> pathlib.Path:
+    """Every episode of `cells` (`run.eval.CellResult`s) as a CSV row (`episode_rows`), to
+    re-analyse, pair or bootstrap a table without re-running it; with `engines` (one per cell),
+    an `engine` column first. Written by process 0 only (`writer.is_writer`)."""
+    path = pathlib.Path(path)
+    if not is_writer():
+        return path
+    path.parent.mkdir(parents=True, exist_ok=True)
+    measures = dict.fromkeys(k for c in cells for k in c.task)
+    columns = ["engine"] * (engines is not None) + [*EPISODE_COLUMNS, *measures]
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns, restval="")
+        w.writeheader()
+        for i, c in enumerate(cells):
+            label = {} if engines is None else {"engine": engines[i]}
+            w.writerows({**label, **row} for row in episode_rows(c))
+    return path
 
 
 def read_episodes(path: str | pathlib.Path, controller: str | None = None) -> list[dict[str, str]]:
@@ -34,7 +100,7 @@ def read_episodes(path: str | pathlib.Path, controller: str | None = None) -> li
         if missing:
             raise DpcError(
                 f"{path} lacks the columns {missing}: give a per-episode CSV of "
-                "`dpc-mjx eval --csv` (run.eval.write_episodes_csv)."
+                "`dpc-mjx eval --csv` (run.report.write_episodes_csv)."
             )
         return [r for r in reader if controller is None or r["controller"] == controller]
 

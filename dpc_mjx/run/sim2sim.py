@@ -26,8 +26,8 @@ from dpc_mjx.run.eval import (
     evaluate,
     paired_row,
     paired_rows,
-    write_episodes_csv,
 )
+from dpc_mjx.run.report import write_episodes_csv
 from dpc_mjx.writer import is_writer
 
 HEADER = (

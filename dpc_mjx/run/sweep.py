@@ -6,7 +6,8 @@
 The arm is the export's (the arm of its first encoder, a parametric `ArmSpec`: `regular` for
 the shipped export); its upper-arm length (m) and gripper mass (kg) take every value of the grid
 (`robots.params.batch_arm_params`), so the whole grid is one batched `mjx.Model` and one program:
-one compile per controller (`envs.model_batch.ModelBatchEnv`, MJX engine). DPC uses the export's
+one compile for every controller (`envs.model_batch.ModelBatchEnv` in an
+`envs.controller_batch.ControllerBatch`, MJX engine). DPC uses the export's
 encoder of that arm at every grid point: the sweep asks how far one encoder carries.
 
 Protocol (as `run.eval`): every grid point runs the same `episodes` episodes, reset from the
@@ -25,6 +26,7 @@ import time
 import numpy as np
 
 from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.controller_batch import ControllerBatch
 from dpc_mjx.envs.model_batch import ModelBatchEnv
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.envs.rollout import run_episodes
@@ -33,8 +35,9 @@ from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.physics import AUTO
 from dpc_mjx.robots.params import batch_arm_params
 from dpc_mjx.robots.variants import arm_name
-from dpc_mjx.run.eval import CONTROLLERS, CellResult, cell_result, write_episodes_csv
+from dpc_mjx.run.eval import CONTROLLERS, CellResult, cell_result
 from dpc_mjx.run.plots import sweep_heatmaps
+from dpc_mjx.run.report import write_episodes_csv
 from dpc_mjx.stats import paired_diff_ci
 from dpc_mjx.writer import is_writer
 
@@ -162,43 +165,47 @@ def sweep(
     overrides = {**overrides, "engine": "mjx"}  # on a CPU too (the default there is native)
     ua, gm = (a.ravel() for a in np.meshgrid(uppers, masses, indexing="ij"))  # (G,) row-major
     points = len(ua)
-    cells, seconds = {}, {}
-    for controller in controllers:
-        t0 = time.perf_counter()
-        base = make(task, arm=arm, controller=controller, **overrides)
-        mx, in_axes = batch_arm_params(
+    k, t0 = len(controllers), time.perf_counter()
+    base = make(task, arm=arm, controller=Controller.DPC, **overrides)
+    mx, in_axes = (
+        batch_arm_params(  # env (c * G + g) * E + i: controller c, grid point g, episode i
             base.mx,
             base.model,
-            upper_arm_length=np.repeat(ua, episodes),  # env g * E + i: grid point g, episode i
-            gripper_mass=np.repeat(gm, episodes),
+            upper_arm_length=np.tile(np.repeat(ua, episodes), k),
+            gripper_mass=np.tile(np.repeat(gm, episodes), k),
         )
-        n_steps = base.config.episode_length if steps is None else steps
-        dpc = controller == Controller.DPC
-        kw = {"policy": artefacts.dpc_policy(arm_name(arm))} if dpc else {}
-        r = run_episodes(
-            ModelBatchEnv(base, mx, in_axes),
-            points * episodes,
-            n_steps,
-            seed=seed,
-            progress=progress,
-            desc=f"sweep {controller} ({points} arms)",
-            groups=points,
-            **kw,
-        )
-        seconds[controller] = time.perf_counter() - t0
-        per_point = {k: v.reshape(points, episodes) for k, v in r.items()}
-        cells[controller] = [
+    )
+    n_steps = base.config.episode_length if steps is None else steps
+    dpc = Controller.DPC in controllers
+    kw = {"policy": artefacts.dpc_policy(arm_name(arm))} if dpc else {}
+    r = run_episodes(  # every controller at every grid point: one batch, one program
+        ControllerBatch(ModelBatchEnv(base, mx, in_axes), controllers),
+        k * points * episodes,
+        n_steps,
+        seed=seed,
+        progress=progress,
+        desc=f"sweep {'/'.join(controllers)} ({points} arms)",
+        groups=k * points,
+        **kw,
+    )
+    wall = (time.perf_counter() - t0) / k  # each controller's share of the batch's wall time
+    seconds = dict.fromkeys(controllers, wall)
+    per_cell = {key: v.reshape(k, points, episodes) for key, v in r.items()}
+    cells = {
+        name: [
             cell_result(
                 f"L={ua[g]:.3f} m, m={gm[g]:.3f} kg",
-                controller,
-                {k: v[g] for k, v in per_point.items()},
+                name,
+                {key: v[c, g] for key, v in per_cell.items()},
                 n_steps,
                 seed,
-                seconds[controller] / points,
+                wall / points,
                 base.TASK_MEASURES,
             )
             for g in range(points)
         ]
+        for c, name in enumerate(controllers)
+    }
     result = SweepResult(uppers, masses, cells, seconds)
     _print_summary(result)
     if out is not None and is_writer():

@@ -49,5 +49,7 @@ def collect_training_data(config: RunConfig, progress: bool = True) -> adapter_l
     for k, ((label, _), env, samples) in enumerate(zip(arms, envs, shares, strict=True)):
         print(f"adapter: collecting {samples:,} samples ({label}, MBC)", flush=True)
         seed = config.seed + FAMILY_SEED_STRIDE * k
-        parts.append(adapter_lib.collect(env, samples, n_envs=n_envs, seed=seed, progress=progress))
+        burn_in = config.data_burn_in  # staggered starts (`adapter.collect`)
+        kw = {"n_envs": n_envs, "seed": seed, "progress": progress, "burn_in": burn_in}
+        parts.append(adapter_lib.collect(env, samples, **kw))
     return parts[0] if len(parts) == 1 else adapter_lib.Dataset.interleave(parts)

@@ -83,12 +83,12 @@ def train(
     elif actor_init is not None:
         carry = actor_init(trainer, carry)
     start_epoch = int(carry.epoch)
-    env_state = trainer.reset(jax.random.fold_in(carry.key, start_epoch))
     log_dir = run_dir if is_writer() else None  # where the log and checkpoints are written
     if log_dir is not None:
         log.rewrite(log_dir, history)
     total = config.epochs
-    if start_epoch < total:
+    if start_epoch < total:  # no epoch to run (sac.num_timesteps=0): no env reset compiled
+        env_state = trainer.reset(jax.random.fold_in(carry.key, start_epoch))
         epoch_fn = trainer.compiled("epoch", carry, env_state)
     eval_key = jax.random.PRNGKey(config.seed + 12345)  # the same episodes at every evaluation
     baseline = {}

@@ -19,8 +19,8 @@ The modules, in the order a call goes through them:
   structure.py  G's static nonzero pattern and its index tables (`_Structure`).
   ops.py        ops along the small leading axes: folds, matvecs, Cholesky, `_pin`.
 
-docs/decisions.md ("Low-level controller: the QP solver") has the method, its tuning and the
-reasons for this layout; docs/benchmarks.md has its speed.
+docs/decisions-controller.md ("Low-level controller: the QP solver") has the method, its tuning and
+the reasons for this layout; docs/benchmarks.md has its speed.
 """
 
 from dpc_mjx.control.qp.api import _solve_reference as _solve_reference

@@ -3,7 +3,7 @@
 `solve` checks one problem's shapes, turns `g_pattern` into its static `_Structure` and calls the
 kernel through the batching rule of batching.py; `_solve_reference` calls the same kernel without
 that rule (under vmap, the batch is then the leading axis of every op), for benchmarks and tests.
-docs/decisions.md ("Low-level controller: the QP solver") describes the method.
+docs/decisions-controller.md ("Low-level controller: the QP solver") describes the method.
 """
 
 from __future__ import annotations

@@ -1,15 +1,15 @@
 """How a vmap of `solve` runs: the batch on the last axis, in chunks (custom_vmap rule).
 
-The kernel (kernel.py) is written for arrays whose trailing axes are batch axes: P (n, n, ...),
-q (n, ...), G (m, n, ...). A single call runs it with no batch axis. Under `jax.vmap`, a batching
-rule (`jax.custom_batching.custom_vmap`) moves the batch to the last, contiguous axis and runs
-the same code on chunks of `_CHUNK` = 64 problems (`_CHUNK_SPARSE` = 128 with a G pattern), one
-after the other (`lax.map`): each XLA:CPU loop is then a SIMD loop over the chunk, and a chunk's
-data (~10 KB per problem dense) stay in the L2 cache. On a GPU the whole batch is one chunk.
-Arguments the vmap does not batch are broadcast; nested vmaps are merged into one batch.
-custom_vmap has no reverse-mode autodiff; nothing differentiates through the solver.
-docs/decisions.md ("Implementation: one problem's code, run batch-minor under vmap") has the
-reasons and what was tried.
+The kernel (kernel.py) is written for arrays whose trailing axes are batch axes: P (n, n, ...), q
+(n, ...), G (m, n, ...). A single call runs it with no batch axis. Under `jax.vmap`, a batching rule
+(`jax.custom_batching.custom_vmap`) moves the batch to the last, contiguous axis and runs the same
+code on chunks of `_CHUNK` = 64 problems (`_CHUNK_SPARSE` = 128 with a G pattern), one after the
+other (`lax.map`): each XLA:CPU loop is then a SIMD loop over the chunk, and a chunk's data (~10 KB
+per problem dense) stay in the L2 cache. On a GPU the whole batch is one chunk. Arguments the vmap
+does not batch are broadcast; nested vmaps are merged into one batch. custom_vmap has no
+reverse-mode autodiff; nothing differentiates through the solver. docs/decisions-controller.md
+("Implementation: one problem's code, run batch-minor under vmap") has the reasons and what was
+tried.
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ from dpc_mjx.control.qp.ops import _pin
 from dpc_mjx.control.qp.settings import QPResult, QPSettings
 from dpc_mjx.control.qp.structure import _Structure
 
-# Problems per chunk of the batched kernel on CPU (docs/decisions.md): a chunk's data stay in the
-# L2 cache, and each op of an iteration has a fixed dispatch cost whatever its size, so the chunk
-# is as large as the cache allows: 64 for a dense G, 128 with a sparse pattern (its tables are
-# ~10x smaller).
+# Problems per chunk of the batched kernel on CPU (docs/decisions-controller.md): a chunk's data
+# stay in the L2 cache, and each op of an iteration has a fixed dispatch cost whatever its size, so
+# the chunk is as large as the cache allows: 64 for a dense G, 128 with a sparse pattern (its tables
+# are ~10x smaller).
 _CHUNK, _CHUNK_SPARSE = 64, 128
 
 

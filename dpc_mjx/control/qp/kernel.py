@@ -16,7 +16,7 @@ problem.py, for arrays with trailing batch axes (...):
 Cost per iteration (n = 12, m = 24): H from the stored row products G_ri G_rj (m n(n+1)/2 = 1872
 multiply-adds dense, 56 for the balance QP's pattern), the Cholesky (~n^3/6), two pairs of
 triangular solves, six matvecs with P, G or G'; ~11k float ops per problem dense. The method and
-its tuning are in docs/decisions.md ("Low-level controller: the QP solver"), its speed in
+its tuning are in docs/decisions-controller.md ("Low-level controller: the QP solver"), its speed in
 docs/benchmarks.md.
 """
 

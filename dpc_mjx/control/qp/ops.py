@@ -1,12 +1,12 @@
 """Array ops along the small leading axes of the QP kernel; trailing axes (...) are batch axes.
 
-The kernel (kernel.py) writes one problem's arithmetic for arrays P (n, n, ...), q (n, ...),
-G (m, n, ...) and per-problem scalars (...). Along the leading axes (n = 12, m = 24 for the balance
-QP) everything here uses static slices only: unrolled matvecs, Cholesky and substitutions, and
-pairwise folds instead of reductions. Every op is then elementwise over the batch, which XLA:CPU
-vectorises (batching.py puts the batch on the last axis). `_pin` keeps XLA:CPU from recomputing a
-fused value inside each of its consumers. docs/decisions.md ("Implementation: one problem's
-code, run batch-minor under vmap") says why each of these forms was chosen.
+The kernel (kernel.py) writes one problem's arithmetic for arrays P (n, n, ...), q (n, ...), G (m,
+n, ...) and per-problem scalars (...). Along the leading axes (n = 12, m = 24 for the balance QP)
+everything here uses static slices only: unrolled matvecs, Cholesky and substitutions, and pairwise
+folds instead of reductions. Every op is then elementwise over the batch, which XLA:CPU vectorises
+(batching.py puts the batch on the last axis). `_pin` keeps XLA:CPU from recomputing a fused value
+inside each of its consumers. docs/decisions-controller.md ("Implementation: one problem's code, run
+batch-minor under vmap") says why each of these forms was chosen.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ def _pin(x: jax.Array, one: jax.Array) -> jax.Array:
 
     XLA:CPU fuses a cheap expression into every consumer and recomputes it there, once per
     element: a per-problem value broadcast over an (m, ...) vector, or a vector read by a
-    matvec, is recomputed m times, and chains of these multiply (docs/decisions.md).
+    matvec, is recomputed m times, and chains of these multiply (docs/decisions-controller.md).
     It does not do so with a float divide by a value it cannot fold, so dividing by `one` (a
     runtime array of ones) makes it compute x into memory once. A pinned value must not be
     divided nor divide: XLA rewrites (x / one) / y as x / (one y), which undoes the pin; hence

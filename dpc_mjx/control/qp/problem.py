@@ -1,12 +1,12 @@
 """The problem as the kernel sees it: sanitised, equilibrated, with G's products stored.
 
-`_prepare` replaces a non-finite problem by a harmless flagged one, scales it (Ruiz equilibration
-of [P G'; G 0], variable scaling D (n, ...), row scaling E (m, ...), 2 sweeps, and a cost scaling
-c (...), so that float32 works with entries of order one) and stores what every iteration reads:
-the entries of Gs = E G D by rows and by columns (for Gs x and Gs'y) and the row products
-Gs_ri Gs_rj from which `_normal_columns` forms H = Ps + Gs' diag(w) Gs. Only the entries of G's
-pattern are stored (structure.py). docs/decisions.md ("Low-level controller: the QP solver") has
-the method and the reasons for this layout.
+`_prepare` replaces a non-finite problem by a harmless flagged one, scales it (Ruiz equilibration of
+[P G'; G 0], variable scaling D (n, ...), row scaling E (m, ...), 2 sweeps, and a cost scaling c
+(...), so that float32 works with entries of order one) and stores what every iteration reads: the
+entries of Gs = E G D by rows and by columns (for Gs x and Gs'y) and the row products Gs_ri Gs_rj
+from which `_normal_columns` forms H = Ps + Gs' diag(w) Gs. Only the entries of G's pattern are
+stored (structure.py). docs/decisions-controller.md ("Low-level controller: the QP solver") has the
+method and the reasons for this layout.
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 
 `QPSettings` holds static Python numbers: they shape the traced program, so a change retraces.
 `QPResult` is the per-problem output, a pytree (`flax.struct`) that vmap and scan carry like any
-array; a controller keeps it as the warm start of its next solve. docs/decisions.md (section "the
-QP solver") explains the tolerances and safeguards that these settings tune.
+array; a controller keeps it as the warm start of its next solve. docs/decisions-controller.md
+(section "the QP solver") explains the tolerances and safeguards that these settings tune.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ nonzero (e.g. `balance.G_PATTERN`: 40 of 288). The kernel then stores and multip
 G x, G'y and the products G_ri G_rj that form H = P + G' diag(w) G. P and the Cholesky factor stay
 dense. A `_Structure` (one per pattern, cached) holds the numpy index tables of these products; a
 dense G is the pattern None, for which the kernel uses slices instead of gathers.
-docs/decisions.md ("Low-level controller: the QP solver") explains the method.
+docs/decisions-controller.md ("Low-level controller: the QP solver") explains the method.
 """
 
 from __future__ import annotations

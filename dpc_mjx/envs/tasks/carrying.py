@@ -23,7 +23,7 @@ ball k goes from its place on the source table to the same place on the target t
 Each episode runs the script at its own pace (script time = rate x time, rate ~
 U(`script_rate`)) and adds its own weight to each ball (`object_mass`); the body stands (trot in
 place, command 0) and the end effectors get vertical pushes (`push_force`; no payload).
-Calibration: docs/results.md (Table I).
+Calibration: docs/results-table-one.md (Table I).
 
 On another base the scene moves with the arm's mount (`scripts.mount_offset`: (dx, dz) m, world
 frame, x forward, z up, the first arm's mount standing on this base minus on the A1; (0, 0) on
@@ -74,7 +74,7 @@ PLACE_CLEARANCE = 0.01  # m, ball above its rest height when released
 APPROACH_Z = -0.7  # world z of the gripper's approach axis (about 45 deg down), soft
 FINGER_CLOSED = 0.004  # m: jaws 0.044 - 0.004 = 0.04 m apart, the ball's diameter
 REST_TOL = 0.01  # m, ball centre from its rest height on the target table for `ball_on_target`
-PUSHES = (0.0, 15.0)  # N, vertical end-effector pushes ~ U (the calibration: docs/results.md)
+PUSHES = (0.0, 15.0)  # N, vertical pushes at the end effector ~ U (docs/results-table-one.md)
 # Move indices of the script (see the module doc).
 _CLOSE, _LIFT, _RELEASE = 2, 3, 6
 
@@ -100,8 +100,8 @@ class CarryingConfig(EnvConfig):
 
 def default_config() -> CarryingConfig:
     """Stand (trot in place, command 0) while the arm carries at its episode's pace, the balls
-    weighted per episode, vertical end-effector pushes (calibrated: docs/results.md, Table I);
-    no payload; 13 s."""
+    weighted per episode, vertical end-effector pushes (calibrated: docs/results-table-one.md, Table
+    I); no payload; 13 s."""
     return CarryingConfig(
         command_vx=(0.0, 0.0),
         command_vy=(0.0, 0.0),

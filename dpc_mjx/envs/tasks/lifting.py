@@ -13,7 +13,7 @@ the way to the raised pose. The raised pose puts the grasp site `RAISE` (m, trun
 home position with the gripper level, solved once per env (`scripts.solve_ik`); for the regular
 arm shoulder 0.06, elbow -1.09, wrist 1.03 rad (the ball goes 12 cm up, 6 cm back). Each episode
 adds its own weight to the ball (`object_mass`); vertical end-effector pushes (`push_force`); no
-payload (the ball is real). Calibration: docs/results.md (Table I).
+payload (the ball is real). Calibration: docs/results-table-one.md (Table I).
 
 On another base the scene moves with the arm's mount by construction: the ball sits at the grasp
 site in the home key, `RAISE` is relative to the grasp site's standing position, and the
@@ -46,7 +46,7 @@ from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 BALL_MASS = 0.3  # kg, the paper's ball
 RAISE = np.array([-0.06, 0.0, 0.12])  # m, grasp site raised pose minus home pose
-PUSHES = (0.0, 30.0)  # N, vertical end-effector pushes ~ U (the calibration: docs/results.md)
+PUSHES = (0.0, 30.0)  # N, vertical pushes at the end effector ~ U (docs/results-table-one.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,7 +68,7 @@ class LiftingConfig(EnvConfig):
 
 def default_config() -> LiftingConfig:
     """v_x ~ 0.3 m/s, turning at 0.3 rad/s from ~10 s; the lift's pace and height and the
-    ball's weight per episode; vertical end-effector pushes (calibrated: docs/results.md,
+    ball's weight per episode; vertical end-effector pushes (calibrated: docs/results-table-one.md,
     Table I); no payload."""
     return LiftingConfig(
         command_vx=(0.2, 0.4),

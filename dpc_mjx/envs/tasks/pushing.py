@@ -5,14 +5,13 @@ ahead; only the end effector (the `pusher`'s plate, or a gripper's three boxes) 
 default arm is `pusher`, the paper's "heavier but flat" arm (0.5 kg plate); any WidowX-like arm
 (`ArmSpec`) can push.
 
-Script: the body walks at a constant command (v_x ~ U(0.15, 0.25) m/s) and stops (command 0)
-at `command_switch` ~ U(5, 6) s, when the box is about at its target 1.5 m ahead; the arm moves
-from home to a fixed pushing pose during the first `arm_move_time` s (divided by the episode's
-pace ~ U(`script_rate`)) and holds it, so the plate meets the box after about 1.5 s and pushes
-it: a steady contact force on the arm is the disturbance. Each episode draws the box's place
-(`box_jitter`: x, y, heading offsets ~ U(-j, j)) and its added weight (`object_mass`), and the
-end effector gets vertical pushes (`push_force`; the payload is off). Calibration: docs/results.md
-(Table I).
+Script: the body walks at a constant command (v_x ~ U(0.15, 0.25) m/s) and stops (command 0) at
+`command_switch` ~ U(5, 6) s, when the box is about at its target 1.5 m ahead; the arm moves from
+home to a fixed pushing pose during the first `arm_move_time` s (divided by the episode's pace ~
+U(`script_rate`)) and holds it, so the plate meets the box after about 1.5 s and pushes it: a steady
+contact force on the arm is the disturbance. Each episode draws the box's place (`box_jitter`: x, y,
+heading offsets ~ U(-j, j)) and its added weight (`object_mass`), and the end effector gets vertical
+pushes (`push_force`; the payload is off). Calibration: docs/results-table-one.md (Table I).
 
 The pushing pose is solved once per env (`scripts.solve_ik`, MuJoCo C): the ee site (the plate's
 face centre) `PUSH_REACH` ahead of the trunk at `PUSH_HEIGHT` above the floor, its normal pitched
@@ -62,7 +61,7 @@ BOX_FRICTION = 0.5  # box-floor and box-plate (the box has contact priority)
 PUSH_REACH = 0.30  # m, ee site ahead of the trunk origin (x, trunk frame)
 PUSH_HEIGHT = 0.15  # m, ee site above the floor
 PUSH_PITCH = math.radians(60.0)  # plate normal below the horizontal
-PUSHES = (0.0, 30.0)  # N, vertical end-effector pushes ~ U (the calibration: docs/results.md)
+PUSHES = (0.0, 30.0)  # N, vertical pushes at the end effector ~ U (docs/results-table-one.md)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,7 +85,7 @@ class PushingConfig(EnvConfig):
 
 def default_config() -> PushingConfig:
     """Walk at ~0.2 m/s for ~5.5 s then stand (trotting in place); the box placed and weighted
-    per episode; vertical end-effector pushes (calibrated: docs/results.md, Table I)."""
+    per episode; vertical end-effector pushes (calibrated: docs/results-table-one.md, Table I)."""
     return PushingConfig(
         command_vx=(0.15, 0.25),
         command_vy=(0.0, 0.0),

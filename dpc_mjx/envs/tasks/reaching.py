@@ -30,7 +30,7 @@ most; the shoulder servo's 20 N·m limit is reached near full reach). At 20 s ep
 On another base these numbers are the A1's scaled by its weight (`envs.registry.WEIGHT_SCALED`:
 pushes, payloads and u's bounds times the ratio of its trunk + legs mass to the A1's; a Go2 up
 to 70 N, a B1 up to 243 N), so that a push is the same share of the robot's weight; calibrated
-per base with MBC against the oracle as above (docs/results.md, "Other bases").
+per base with MBC against the oracle as above (docs/results-transfer.md, "Other bases").
 """
 
 from __future__ import annotations

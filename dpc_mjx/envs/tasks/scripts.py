@@ -32,11 +32,11 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 
+from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import build
 from dpc_mjx.robots.arms import ArmSpec
-from dpc_mjx.robots.base_model import A1_HOME_HEIGHT
 from dpc_mjx.robots.layout import ArmLayout, layout
 from dpc_mjx.robots.variants import RobotSpec
 
@@ -107,9 +107,10 @@ def smooth(x: jax.Array) -> jax.Array:
 
 def stand_height(model: mujoco.MjModel) -> float:
     """m, the trunk's height standing under the controller: `STAND_HEIGHT` (the A1's) times
-    h = the model's home trunk height / the A1's (`control.base_scaling`); on the A1 h = 1 and
-    this is `STAND_HEIGHT` exactly."""
-    return STAND_HEIGHT * (float(model.key_qpos[0][2]) / A1_HOME_HEIGHT)
+    h = the model's home trunk height / the A1's (`control.base_scaling.BaseScale.height`, the
+    rule the controller's desired height follows); on the A1 h = 1 and this is `STAND_HEIGHT`
+    exactly."""
+    return STAND_HEIGHT * model_scale(model).height
 
 
 def standing_data(model: mujoco.MjModel, x: float = 0.0) -> mujoco.MjData:
