@@ -871,3 +871,17 @@ def test_checkpoint_kill_after_commit_rolls_forward(tmp_path, monkeypatch):
     restored, history = checkpoint.restore(tmp_path, _carry(1, 0), META)
     _assert_trees_equal(restored, second)
     assert len(history) == 3 and not (tmp_path / checkpoint.STAGED).exists()
+
+
+def test_an_export_is_evaluated_with_the_engine_it_records_where_the_device_runs_it(monkeypatch):
+    """b1's export records the native engine: a CPU evaluates it there without being told; an
+    export that records none gets 'auto'; on an accelerator native becomes 'auto' (MJX)."""
+    from dpc_mjx.io import shipped  # noqa: PLC0415 (the function under test)
+
+    b1, regular = dio.load(shipped.SHIPPED_BASES["b1"]), dio.load(shipped.SHIPPED)
+    assert b1.meta["env_config"]["engine"] == "native"
+    assert shipped.engine_of(b1) == "native" and shipped.engine_of(regular) == "auto"
+    _, _, options = shipped.export_cells(shipped.SHIPPED_BASES["b1"], None, ["mbc"], "reaching")
+    assert options["engine"] == "native"
+    monkeypatch.setattr(shipped, "resolve_engine", lambda engine: "mjx")  # as on a GPU
+    assert shipped.engine_of(b1) == "auto"
