@@ -89,7 +89,7 @@ def run_variants(variants=tuple(VARIANTS), batch: int = 16, seconds: float = 1.0
 
 
 # The shipped run's recipe (`RunConfig`'s defaults: random-motion data, the adapter, the actor
-# regressed on the oracle's u on [s_body, z, u_obs], no SAC stage) on a budget that runs in a few
+# regressed on the oracle's u on [s_body, z], no SAC stage) on a budget that runs in a few
 # minutes on a 2-core CPU: a fifth of the shipped run's samples and a sixteenth of its
 # evaluation (docs/results.md). `quick` is a smoke run of the same stages.
 DEMO = {
