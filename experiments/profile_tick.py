@@ -183,7 +183,7 @@ def _step_parts(t: Timer, env, d, info, dist, keys, noise):
     )
     t.row(
         "ee_sq_err (mjx.jac per arm)",
-        lambda d, dist: env._ee_sq_err(d, env.arm_targets(dist, d.time, d)),
+        lambda d, dist: outcome.ee_sq_err(env.mx, env.lay, d, env.arm_targets(dist, d.time, d)),
         d,
         dist,
         per_tick=False,

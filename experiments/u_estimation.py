@@ -2,22 +2,28 @@
 figure "output parameters under a sudden force".
 
     python experiments/u_estimation.py [--export DIR] [--other DIR] [--other-label NAME]
-        [--episodes 32] [--seed 5000]
+        [--arm regular] [--controller dpc] [--episodes 32] [--seed 5000] [--engine auto]
 
-Held-out rollouts: `--episodes` episodes of the reaching task (regular arm, the export's env
-options, sensors as configured there) under the export's own DPC, from seeds `--seed`.. that
+Held-out rollouts: `--episodes` episodes of the reaching task with `--arm` (the export's env
+options, sensors as configured there) under `--controller` (default the export's own DPC; the
+oracle gives the states where a perfect estimate is asked for), from seeds `--seed`.. that
 chose nothing. On every step before an episode's end, each estimator's u is compared with the
 oracle's (the measured mount wrench, privileged) in the yaw frame (heading-aligned: x forward,
-y left, z up; torques about the A1 COM):
+y left, z up; torques about the base's COM):
 
     observer   the disturbance observer's estimate u_obs (what the `observer` controller uses)
-    dpc        the export's policy, u = u_scale * pi(obs) (the default recipe)
-    other      `--other`'s policy on the same observations (e.g. another recipe's export;
-               named `--other-label`)
-    other, own loop   `--other`'s policy on rollouts under its own control (same seeds)
+    gravity    the arms' weight and its torque at their pose (`DpcEnv.arm_gravity`; what DPC
+               with `u_base` 'gravity' adds its policy's u to)
+    dpc        the export's u: u_scale * pi(obs), plus u_obs or u_gravity by its base
+    other      `--other`'s u on the same observations (e.g. another recipe's export; named
+               `--other-label`)
+    other, own loop   `--other`'s u on rollouts under its own control (same seeds; with
+               `--controller dpc` only)
 
-A learned estimate is only as good as the states it is asked on: the first three rows share the
-export's states (the figure needs one episode), the last shows `--other` where it acts.
+A learned estimate is only as good as the states it is asked on: the first rows share the
+states of `--controller` (the figure needs one episode), the last shows `--other` where it acts.
+A second table gives each component's mean (the oracle's, and each estimate's) and the share of
+steps where the oracle's |u| exceeds the policy's bound u_scale (a policy's u cannot go there).
 
 The figure (`--figure`) shows f_z, tau_x and tau_y around the first push onset (an end-effector
 force that starts after at least 1 s of quiet) of an episode that does not fall.
@@ -43,11 +49,13 @@ COMPONENTS = ("f_x", "f_y", "f_z", "tau_x", "tau_y", "tau_z")
 PUSH_ONSET = 5.0  # N: an end-effector force above this starts a push
 
 
-def rollouts(export: pathlib.Path, episodes: int, steps: int, seed: int) -> dict:
-    """Per-step records (steps, episodes, ...) of the export's DPC on the reaching task."""
+def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
+    """Per-step records (steps, episodes, ...) of `args.controller` on the reaching task with
+    `args.arm`, the export's env options."""
     artefacts = io.load(export)
-    env = make(DEFAULT_TASK, arm="regular", controller="dpc", **env_overrides(artefacts))
-    policy = artefacts.dpc_policy("regular")
+    options = env_overrides(artefacts) | {"engine": args.engine}
+    env = make(DEFAULT_TASK, arm=args.arm, controller=args.controller, **options)
+    policy = artefacts.dpc_policy(args.arm)
 
     def record(before, after):
         yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
@@ -56,31 +64,63 @@ def rollouts(export: pathlib.Path, episodes: int, steps: int, seed: int) -> dict
             "obs": before.obs,
             "yaw": yaw,
             "u_oracle": privileged[:, PRIVILEGED["u_oracle"]],
+            "u_gravity": jax.vmap(env.arm_gravity)(before.pipeline_state),  # (B, 6) world
             "push": privileged[:, PRIVILEGED["ee_force"]],
             "done": after.done,
         }
 
-    carry, key = rollout.start(env, episodes, seed)
+    carry, key = rollout.start(env, args.episodes, args.seed)
     run_chunk = rollout.make_chunk(jax.vmap(env.step), policy, 50, record)
     parts = []
-    for carry, records in rollout.chunks(run_chunk, carry, key, steps // 50):
+    for carry, records in rollout.chunks(run_chunk, carry, key, args.steps // 50):
         parts.append(records)
     out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     done_before = np.cumsum(out["done"], axis=0) - out["done"]  # dones before this step
     out["alive"] = done_before == 0
     out["u_scale"] = np.asarray(env.config.u_scale)
+    out["gravity"] = np.asarray(wrench_to_yaw_frame(out["u_gravity"], out["yaw"]))
     return out
 
 
-def estimates(rec: dict, export: pathlib.Path) -> np.ndarray:
-    """(steps, episodes, 6) the export's u on the recorded observations, yaw frame."""
+def estimates(rec: dict, export: pathlib.Path, arm: str) -> np.ndarray:
+    """(steps, episodes, 6) the export's u on the recorded observations, yaw frame: its
+    policy's u_scale * a, plus u_obs or the arms' gravity wrench by its `u_base`."""
     artefacts = io.load(export)
-    policy = artefacts.dpc_policy("regular")
-    frame = env_overrides(artefacts)["u_frame"]
-    u = np.asarray(jax.jit(policy)(rec["obs"], None)) * np.asarray(
-        make(DEFAULT_TASK, arm="regular", **env_overrides(artefacts)).config.u_scale
+    options = env_overrides(artefacts)
+    scale = np.asarray(make(DEFAULT_TASK, arm=arm, **options).config.u_scale)
+    act = jax.jit(lambda p, obs: p(obs, None))(artefacts.dpc_policy(arm), rec["obs"])
+    u = np.asarray(act) * scale
+    if options["u_frame"] != "yaw":
+        u = np.asarray(wrench_to_yaw_frame(u, rec["yaw"]))
+    base = {"observer": rec["obs"][..., -U_OBS_SIZE:], "gravity": rec["gravity"]}
+    return u + base.get(options.get("u_base", "zero"), 0.0)
+
+
+def accuracy_table(rows: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    """R^2 per component and RMSE of force and torque of each estimate against its truth."""
+    print(
+        "| estimate | " + " | ".join(f"R^2 {c}" for c in COMPONENTS) + " | RMSE f (N) | "
+        "RMSE tau (N·m) |"
     )
-    return u if frame == "yaw" else np.asarray(wrench_to_yaw_frame(u, rec["yaw"]))
+    print("|---|" + "---|" * 8)
+    for name, (u, true) in rows.items():
+        r2, rmse = stats.r2(true, u), stats.rmse(true, u)  # per component
+        cells = " | ".join(f"{v:.2f}" for v in r2)
+        f_rmse = np.sqrt((rmse[:3] ** 2).mean())
+        t_rmse = np.sqrt((rmse[3:] ** 2).mean())
+        print(f"| {name} | {cells} | {f_rmse:.2f} | {t_rmse:.2f} |")
+
+
+def bias_table(rows: dict, truth: np.ndarray, u_scale: np.ndarray) -> None:
+    """Each component's mean (N, N·m; the oracle's, then each estimate's on the same steps) and
+    the share of steps where the oracle's |u| exceeds the policy's bound `u_scale`."""
+    print("\n| mean | " + " | ".join(COMPONENTS) + " |")
+    print("|---|" + "---|" * 6)
+    print("| oracle (privileged) | " + " | ".join(f"{v:+.2f}" for v in truth.mean(0)) + " |")
+    for name, (u, _) in rows.items():
+        print(f"| {name} | " + " | ".join(f"{v:+.2f}" for v in u.mean(0)) + " |")
+    beyond = np.mean(np.abs(truth) > u_scale, axis=0)
+    print("| oracle beyond u_scale (share of steps) | " + " | ".join(f"{v:.2f}" for v in beyond))
 
 
 def figure(rec: dict, series: dict[str, np.ndarray], truth: np.ndarray, path: pathlib.Path):
@@ -126,33 +166,32 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=32)
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=5000)
+    ap.add_argument("--arm", default="regular", help="an arm the export has an encoder of")
+    ap.add_argument("--controller", default="dpc", help="whose states: dpc, oracle, ...")
+    ap.add_argument("--engine", default="auto", help="auto, mjx or native")
     ap.add_argument("--figure", default="docs/figures/u_estimation.png")
     args = ap.parse_args()
-    rec = rollouts(pathlib.Path(args.export), args.episodes, args.steps, args.seed)
+    rec = rollouts(pathlib.Path(args.export), args)
     truth = np.asarray(wrench_to_yaw_frame(rec["u_oracle"], rec["yaw"]))
     u_obs = rec["obs"][..., -U_OBS_SIZE:]  # the observation's last entries
-    series = {"observer": u_obs, "dpc": estimates(rec, args.export)}
+    series = {"observer": u_obs, "gravity": rec["gravity"]}
+    series["dpc"] = estimates(rec, args.export, args.arm)
     rows = {}
     if args.other:
-        series[args.other_label] = estimates(rec, args.other)
-        own = rollouts(pathlib.Path(args.other), args.episodes, args.steps, args.seed)
+        series[args.other_label] = estimates(rec, args.other, args.arm)
+    if args.other and args.controller == "dpc":
+        own = rollouts(pathlib.Path(args.other), args)
         own_truth = np.asarray(wrench_to_yaw_frame(own["u_oracle"], own["yaw"]))
-        own_u = estimates(own, args.other)
+        own_u = estimates(own, args.other, args.arm)
         rows[f"{args.other_label}, own loop"] = (own_u[own["alive"]], own_truth[own["alive"]])
     alive = rec["alive"]
     rows = {name: (u[alive], truth[alive]) for name, u in series.items()} | rows
-    print(f"{int(alive.sum()):,} steps of {args.episodes} episodes (seeds from {args.seed})")
     print(
-        "| estimate | " + " | ".join(f"R^2 {c}" for c in COMPONENTS) + " | RMSE f (N) | "
-        "RMSE tau (N·m) |"
+        f"{args.arm}, under {args.controller}: {int(alive.sum()):,} steps of {args.episodes} "
+        f"episodes (seeds from {args.seed})"
     )
-    print("|---|" + "---|" * 8)
-    for name, (u, true) in rows.items():
-        r2, rmse = stats.r2(true, u), stats.rmse(true, u)  # per component
-        cells = " | ".join(f"{v:.2f}" for v in r2)
-        f_rmse = np.sqrt((rmse[:3] ** 2).mean())
-        t_rmse = np.sqrt((rmse[3:] ** 2).mean())
-        print(f"| {name} | {cells} | {f_rmse:.2f} | {t_rmse:.2f} |")
+    accuracy_table(rows)
+    bias_table({name: rows[name] for name in series}, truth[alive], rec["u_scale"])
     figure(rec, series, truth, pathlib.Path(args.figure))
 
 

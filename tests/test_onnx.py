@@ -178,6 +178,30 @@ def test_a_policy_on_the_observer_adds_u_obs_in_the_graph(tmp_path):
     np.testing.assert_allclose(expected - obs[:, -6:], policy.residual(obs), atol=1e-9)
 
 
+def test_a_policy_on_gravity_gives_its_residual_in_the_graph(tmp_path):
+    """u_base='gravity': the graph's u is u_scale * a, `NumpyPolicy.residual(obs)`; the robot adds
+    its arms' gravity wrench (the graph has no kinematics)."""
+    ort = pytest.importorskip("onnxruntime")
+    art = load(SHIPPED)
+    out = export(
+        tmp_path / "gravity",
+        adapter_config=art.adapter_config,
+        policy=art.policy,
+        decoder=art.decoder,
+        encoders={"z1": art.encoder("z1")},
+        arms={"z1": art.arm_spec("z1")},
+        env_config=EnvConfig(u_base="gravity"),
+    )
+    session = ort.InferenceSession(
+        onnx_graph.onnx_model(out, "z1").SerializeToString(), providers=["CPUExecutionProvider"]
+    )
+    obs = _observations()["z1"]
+    (u,) = session.run(None, {"obs": obs})
+    expected = NumpyPolicy(out, "z1").residual(obs)
+    err = np.abs(u - expected) / np.maximum(1.0, np.abs(expected))
+    assert err.max() <= TOL, f"max |du| / max(1, |u|) = {err.max():.2e}"
+
+
 def test_cli_writes_a_graph_with_a_dynamic_batch_axis(tmp_path, capsys):
     ort = pytest.importorskip("onnxruntime", reason="the onnx extra: pip install 'dpc-mjx[onnx]'")
     out = tmp_path / "graphs" / "policy.onnx"

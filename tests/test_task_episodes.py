@@ -21,7 +21,7 @@ from helpers import FAST_COMPILE
 from mujoco import mjx
 
 import dpc_mjx
-from dpc_mjx.envs import DEFAULT_TASK, base, rollout
+from dpc_mjx.envs import DEFAULT_TASK, base, outcome, rollout
 from dpc_mjx.envs.disturbances import GRAVITY, integrate_command
 
 _EPISODES = 4
@@ -91,7 +91,8 @@ def test_the_end_effector_error_is_the_forward_kinematics_to_first_order(arm):
     dq = rng.choice([-0.02, 0.02], len(lay.arm_act))  # rad (m for a finger: no ee motion)
     qadr = model.jnt_qposadr[model.actuator_trnid[lay.arm_act, 0]]  # each servo's joint
     targets = data.qpos[qadr] + dq
-    got = float(env._ee_sq_err(mjx.put_data(model, data), jp.asarray(targets, jp.float32)))
+    targets_f32 = jp.asarray(targets, jp.float32)
+    got = float(outcome.ee_sq_err(env.mx, lay, mjx.put_data(model, data), targets_f32))
     moved = mujoco.MjData(model)
     moved.qpos[:] = data.qpos
     moved.qpos[qadr] = targets

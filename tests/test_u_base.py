@@ -1,5 +1,8 @@
 """DPC on the observer (`EnvConfig.u_base='observer'`): the controller adds the policy's u to the
-observer's estimate of each tick, and the policy is fitted to the residual u_oracle - u_obs."""
+observer's estimate of each tick, and the policy is fitted to the residual u_oracle - u_obs (with
+'gravity', to u_oracle - u_gravity)."""
+
+import dataclasses
 
 import jax
 import jax.numpy as jp
@@ -62,21 +65,26 @@ def test_only_dpc_adds_the_estimate_and_bad_bases_are_refused():
         make(DEFAULT_TASK, u_base="observer", u_frame="world")
 
 
-def test_the_residual_target_is_the_oracles_u_minus_the_estimate_in_either_frame():
+def _random_wrenches(n: int = 32) -> Dataset:
+    """n rows of random u_oracle and u_gravity (world frame), u_obs (yaw frame) and headings."""
     rng = np.random.default_rng(0)
-    n = 32
     yaw = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
-    u_oracle = rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # world frame
-    u_obs = rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # yaw frame, as observed
-    data = Dataset(
+    wrench = lambda: rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # noqa: E731 (N, N·m)
+    return Dataset(
         s_body=np.zeros((n, 11), np.float32),
         s_arm=np.zeros((n, 0), np.float32),
         p_arm=np.zeros((n, 0), np.float32),
         s_drp_next=np.zeros((n, 2), np.float32),
-        u_oracle=u_oracle,
-        u_obs=u_obs,
+        u_oracle=wrench(),
+        u_obs=wrench(),
         yaw=yaw,
+        u_gravity=wrench(),
     )
+
+
+def test_the_residual_target_is_the_oracles_u_minus_the_estimate_in_either_frame():
+    data = _random_wrenches()
+    u_oracle, u_obs, yaw = data.u_oracle, data.u_obs, data.yaw
     scale = np.full(6, 40.0, np.float32)
     world = regression_target(data, scale, "world", "observer")
     expected = (u_oracle - np.asarray(wrench_to_world(u_obs, yaw))) / scale
@@ -88,6 +96,20 @@ def test_the_residual_target_is_the_oracles_u_minus_the_estimate_in_either_frame
     expected = np.clip(data.u_oracle_in("yaw") / scale, -U_CLIP, U_CLIP)
     np.testing.assert_allclose(paper, expected, atol=0)
     assert np.any(np.abs(world - paper) > 0.01)  # the estimate made a difference
+
+
+def test_the_gravity_target_is_the_oracles_u_minus_the_arms_gravity_wrench():
+    data = _random_wrenches()
+    scale = np.full(6, 40.0, np.float32)
+    world = regression_target(data, scale, "world", "gravity")
+    expected = np.clip((data.u_oracle - data.u_gravity) / scale, -U_CLIP, U_CLIP)
+    np.testing.assert_allclose(world, expected, atol=_U_TOL)
+    yaw_frame = regression_target(data, scale, "yaw", "gravity")
+    expected = (data.u_oracle_in("yaw") - data.u_gravity_in("yaw")) / scale
+    np.testing.assert_allclose(yaw_frame, np.clip(expected, -U_CLIP, U_CLIP), atol=_U_TOL)
+    without = dataclasses.replace(data, u_gravity=None)
+    with pytest.raises(DpcError, match="no u_gravity"):
+        regression_target(without, scale, "world", "gravity")
 
 
 def _trajectories() -> Dataset:

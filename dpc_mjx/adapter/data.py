@@ -39,7 +39,17 @@ from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world, wrench_to_yaw_fra
 
 DRP = S_BODY_DRP  # roll and pitch rate (rad/s, trunk frame) inside s_body
 # The per-row columns of a `Dataset` (s_body first)
-_ROWS = ("s_body", "s_arm", "p_arm", "s_drp_next", "env_id", "u_oracle", "u_obs", "yaw")
+_ROWS = (
+    "s_body",
+    "s_arm",
+    "p_arm",
+    "s_drp_next",
+    "env_id",
+    "u_oracle",
+    "u_obs",
+    "yaw",
+    "u_gravity",
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +67,8 @@ class Dataset:
     u_oracle: np.ndarray | None = None
     u_obs: np.ndarray | None = None  # (N, 6) the observer's estimate at t, yaw frame (obs block)
     yaw: np.ndarray | None = None  # (N,) rad, the trunk's heading at t (world frame <-> yaw frame)
+    # (N, 6) the arms' gravity wrench at t from their file's masses (`DpcEnv.arm_gravity`), world
+    u_gravity: np.ndarray | None = None
     env_steps: int = 0  # env steps run to collect them (kept + dropped)
     seconds: float = 0.0  # wall time of the collection
 
@@ -85,11 +97,20 @@ class Dataset:
 
     def u_oracle_in(self, frame: str) -> np.ndarray:
         """(N, 6) the oracle's u in `frame` ('world', or 'yaw': turned by the heading `yaw`)."""
-        if self.u_oracle is None or (frame == "yaw" and self.yaw is None):
-            raise DpcError("This dataset has no u_oracle (or yaw) column; collect it again.")
+        return self._world_wrench_in("u_oracle", frame)
+
+    def u_gravity_in(self, frame: str) -> np.ndarray:
+        """(N, 6) the arms' gravity wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
+        return self._world_wrench_in("u_gravity", frame)
+
+    def _world_wrench_in(self, name: str, frame: str) -> np.ndarray:
+        """(N, 6) the world-frame wrench column `name` in `frame` ('world' or 'yaw')."""
+        column = getattr(self, name)
+        if column is None or (frame == "yaw" and self.yaw is None):
+            raise DpcError(f"This dataset has no {name} (or yaw) column; collect it again.")
         if frame == "world":
-            return self.u_oracle
-        return np.asarray(wrench_to_yaw_frame(self.u_oracle, self.yaw), np.float32)
+            return column
+        return np.asarray(wrench_to_yaw_frame(column, self.yaw), np.float32)
 
     def u_obs_in(self, frame: str) -> np.ndarray:
         """(N, 6) the observer's estimate in `frame` ('yaw', as observed, or 'world': turned
@@ -227,9 +248,10 @@ def collect(
 
     def record(before, after):  # the obs, its oracle u, heading and the next roll/pitch rates
         u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
+        u_gravity = jax.vmap(env.unwrapped.arm_gravity)(before.pipeline_state)  # (B, 6) world
         yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
         keep = after.done == 0.0  # the next obs is a successor of obs
-        return before.obs, u_oracle, yaw, after.obs[:, layout.s_body][:, DRP], keep
+        return before.obs, u_oracle, yaw, after.obs[:, layout.s_body][:, DRP], keep, u_gravity
 
     t0 = time.perf_counter()
     key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the policy
@@ -251,17 +273,14 @@ def collect(
             if i < burn_chunks:  # staggered starts: these rows are dropped
                 pbar.set_postfix_str(f"burn-in {(i + 1) * chunk}/{burn_chunks * chunk} steps")
                 continue
-            obs, u, yaw, drp, keep = (x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out)
-            parts.append((obs[keep], drp[keep], ids[keep], u[keep], yaw[keep]))
+            obs, u, yaw, drp, keep, grav = (x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out)
+            parts.append((obs[keep], drp[keep], ids[keep], u[keep], yaw[keep], grav[keep]))
             kept += int(keep.sum())
             pbar.update(min(int(keep.sum()), samples - pbar.n))
             if kept >= samples:
                 break
-    obs = np.concatenate([p[0] for p in parts])[:samples].astype(np.float32)
-    drp = np.concatenate([p[1] for p in parts])[:samples].astype(np.float32)
-    env_id = np.concatenate([p[2] for p in parts])[:samples]
-    u_oracle = np.concatenate([p[3] for p in parts])[:samples].astype(np.float32)
-    yaw = np.concatenate([p[4] for p in parts])[:samples].astype(np.float32)
+    columns = (np.concatenate([p[k] for p in parts])[:samples] for k in range(len(parts[0])))
+    obs, drp, env_id, u_oracle, yaw, u_gravity = columns  # float32 but env_id (int32)
     return Dataset(
         s_body=obs[:, layout.s_body],
         s_arm=obs[:, layout.s_arm],
@@ -271,6 +290,7 @@ def collect(
         u_oracle=u_oracle,
         u_obs=obs[:, layout.u_obs],
         yaw=yaw,
+        u_gravity=u_gravity,
         env_steps=steps,
         seconds=time.perf_counter() - t0,
     )

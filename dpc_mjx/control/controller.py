@@ -267,11 +267,22 @@ def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
     return jp.concatenate([f_a, tau_a])
 
 
+def gravity_u(masses: jax.Array, gravity: jax.Array, coms: jax.Array, com_pos: jax.Array):
+    """(6,) u = sum over bodies b of [m_b g, (c_b - c) x m_b g] (N, N·m; world frame): the
+    weight of the bodies `masses` (n_b,) kg at their COMs `coms` (n_b, 3) m and its torque about
+    `com_pos` (3,) m, under `gravity` (3,) m/s^2. For the arm bodies at their simulated pose, the
+    static part of the mount wrench that `oracle_u` measures (the arm encoders' 0.001 rad and
+    the IMU's attitude error are not applied to it)."""
+    weight = masses[:, None] * gravity  # (n_b, 3) N
+    return jp.concatenate([weight.sum(0), jp.cross(coms - com_pos, weight).sum(0)])
+
+
 __all__ = [
     "BodyState",
     "ControllerConfig",
     "ControllerState",
     "LowLevelController",
+    "gravity_u",
     "make_controller",
     "oracle_u",
 ]

@@ -8,8 +8,9 @@ same code under both engines.
 
 u by controller (`dpc_mjx.controllers`): 'mbc' 0; 'observer' the momentum observer's estimate;
 'oracle' the measured arm-mount wrench; 'dpc' u_scale * clip(action, -1, 1) (`EnvConfig.u_scale`)
-in the yaw frame (`u_frame`), with `u_base='observer'` added to the observer's estimate. The
-action is ignored by all but 'dpc'. `info['controller']`, where present, picks it per env.
+in the yaw frame (`u_frame`), with `u_base='observer'` added to the observer's estimate, with
+'gravity' to the arms' gravity wrench (`arm_gravity`). The action is ignored by all but 'dpc'.
+`info['controller']`, where present, picks it per env.
 
 State (brax `State`):
     pipeline_state  mjx.Data
@@ -58,7 +59,7 @@ from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
-from dpc_mjx.control.controller import make_controller, oracle_u
+from dpc_mjx.control.controller import gravity_u, make_controller, oracle_u
 from dpc_mjx.control.state import has_fallen
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs import observations, outcome, rewards
@@ -107,10 +108,8 @@ class DpcEnv(Env):
         self._object_bodies = np.array([o.body for o in self.props.objects], int)
         self._ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
         self._ee_bodies = self.model.site_bodyid[self._ee_sites]
-        # each arm's servo targets (columns of p_arm) and joints, in the same order
-        cols = np.cumsum([0] + [len(a.act) for a in self.lay.arms])
-        self._arm_cols = [np.arange(cols[k], cols[k + 1]) for k in range(len(self.lay.arms))]
         self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
+        self._arm_masses = jp.asarray(self.model.body_mass[self.lay.arm_bodies], jp.float32)  # kg
 
     # task hooks -----------------------------------------------------------------------------
 
@@ -239,7 +238,7 @@ class DpcEnv(Env):
         fall = fall & ~bad
         new_metrics = outcome.step_metrics(r, vel - command, sb, fall, bad) | {
             "pos_sq_err": jp.sum((d.qpos[:2] - dist.ref_pose[:2]) ** 2),
-            "ee_sq_err": self._ee_sq_err(d, self.arm_targets(dist, d.time, d)),
+            "ee_sq_err": outcome.ee_sq_err(self.mx, self.lay, d, self.arm_targets(dist, d.time, d)),
             **self.task_metrics(d, dist),
         }
         new_metrics = outcome.zero_if_bad(new_metrics, bad)
@@ -321,10 +320,19 @@ class DpcEnv(Env):
         return self._dpc_u(d, u_policy), self.config.adds_observer_estimate
 
     def _dpc_u(self, d, u_policy: jax.Array) -> jax.Array:
-        """(6,) the policy's u in the world frame (turned from the yaw frame, `u_frame`)."""
+        """(6,) the policy's u in the world frame (turned from the yaw frame, `u_frame`), plus
+        the arms' gravity wrench with `u_base` 'gravity'."""
         if self.config.u_frame == "yaw":  # the policy's u turns with the heading
-            return wrench_to_world(u_policy, self._yaw(d))
+            u_policy = wrench_to_world(u_policy, self._yaw(d))
+        if self.config.u_base == "gravity":
+            return u_policy + self.arm_gravity(d)
         return u_policy
+
+    def arm_gravity(self, d) -> jax.Array:
+        """(6,) world frame: the arms' weight and its torque about the base's COM at this tick's
+        pose, from the arm file's masses (`control.controller.gravity_u`; `u_base` 'gravity')."""
+        gravity = jp.asarray(self.model.opt.gravity, jp.float32)  # (3,) m/s^2, world
+        return gravity_u(self._arm_masses, gravity, d.xipos[self.lay.arm_bodies], self._com_pos(d))
 
     def _oracle(self, d) -> jax.Array:
         """(6,) the measured arm-mount wrench about the base's COM (world frame)."""
@@ -371,21 +379,6 @@ class DpcEnv(Env):
         lever = d.site_xpos[self._ee_sites] - d.xipos[self._ee_bodies]
         wrench = jp.concatenate([forces, jp.cross(lever, forces)], axis=1)
         return xfrc.at[self._ee_bodies].add(wrench)
-
-    def _ee_sq_err(self, d, targets: jax.Array) -> jax.Array:
-        """() m^2: the squared distance of each end effector (`ee` site) from where the servo
-        targets `targets` (n_act,) would put it, to first order, |J_arm (p_arm - q_arm)|^2 with
-        J_arm the site's position Jacobian (world) over the arm's joints, mean over arms; 0
-        without arms. (The servos' tracking error in joint space, seen at the end effector.)"""
-        if not len(self._ee_sites):
-            return jp.zeros(())
-        errs = []
-        for k, arm in enumerate(self.lay.arms):
-            site = self._ee_sites[k]
-            jacp, _ = mjx.jac(self.mx, d, d.site_xpos[site], self._ee_bodies[k])  # (nv, 3)
-            dq = targets[self._arm_cols[k]] - d.qpos[arm.qpos]  # (n_k,) rad (m for a finger)
-            errs.append(jp.sum((dq @ jacp[arm.dof]) ** 2))
-        return jp.mean(jp.stack(errs))
 
     def _privileged(self, d, dist) -> jax.Array:
         """(10,) [u_oracle (6), payload (1), ee push force (3)], see `observations.PRIVILEGED`."""

@@ -27,7 +27,7 @@ from dpc_mjx.physics import ENGINE_CHOICES
 
 CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
-U_BASES = ("zero", "observer")  # what DPC's policy u is added to (`EnvConfig.u_base`)
+U_BASES = ("zero", "observer", "gravity")  # what DPC's policy u is added to (`EnvConfig.u_base`)
 GAITS = ("trot", "stand")
 
 
@@ -105,10 +105,13 @@ class EnvConfig:
     # policy observes nothing of the heading (s_body and u_obs are yaw-frame), so only a yaw-frame u
     # can follow the arm's moments as the robot turns (docs/results-estimator.md, ablation).
     u_frame: str = "yaw"
-    # What the policy's u is added to ('dpc' only): 'zero' (the paper: u = the policy's u) or
+    # What the policy's u is added to ('dpc' only): 'zero' (the paper: u = the policy's u),
     # 'observer' (u = the disturbance observer's estimate of each tick, world frame, + the
     # policy's u: the policy is a learned residual of the classical estimate, trained on
-    # u_oracle - u_obs, `policy.regression`)
+    # u_oracle - u_obs, `policy.regression`), or 'gravity' (u = the arms' weight and its torque
+    # about the base's COM, from the arm file's masses at the arm's pose of each tick
+    # (`DpcEnv.arm_gravity`), + the policy's u, trained on u_oracle - u_gravity: the learned part
+    # is the arm's motion, its weight comes from its file)
     u_base: str = "zero"
     max_force: float | tuple[float, float, float] = (15.0, 15.0, 60.0)  # N
     max_torque: float | tuple[float, float, float] = (12.0, 12.0, 3.0)  # N·m

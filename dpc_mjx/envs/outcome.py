@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jp
+import numpy as np
+from mujoco import mjx
 
 # Per-step metrics (summed over an episode by brax's EpisodeWrapper):
 METRICS = (
@@ -23,7 +25,7 @@ METRICS = (
     "roll_sq",  # rad^2
     "pitch_sq",  # rad^2
     "pos_sq_err",  # m^2, trunk (x, y) minus the desired path (`Disturbances.ref_pose`)
-    "ee_sq_err",  # m^2, end-effector tracking error, first order, mean over arms (`_ee_sq_err`)
+    "ee_sq_err",  # m^2, end-effector tracking error, first order, mean over arms (`ee_sq_err`)
 )
 
 
@@ -63,9 +65,27 @@ def step_metrics(
     }
 
 
+def ee_sq_err(mx: mjx.Model, lay, d, targets: jax.Array) -> jax.Array:
+    """() m^2: the squared distance of each end effector (`ee` site) from where the servo
+    targets `targets` (n_act,) would put it, to first order, |J_arm (p_arm - q_arm)|^2 with
+    J_arm the site's position Jacobian (world) over the arm's joints, mean over arms of the
+    layout `lay` (`robots.layout`); 0 without arms. (The servos' tracking error in joint space,
+    seen at the end effector.)"""
+    if not lay.arms:
+        return jp.zeros(())
+    errs, col = [], 0
+    for arm in lay.arms:
+        body = int(np.asarray(mx.site_bodyid)[arm.ee_site])
+        jacp, _ = mjx.jac(mx, d, d.site_xpos[arm.ee_site], body)  # (nv, 3)
+        dq = targets[col : col + len(arm.act)] - d.qpos[arm.qpos]  # (n_k,) rad (m for a finger)
+        errs.append(jp.sum((dq @ jacp[arm.dof]) ** 2))
+        col += len(arm.act)  # each arm's servo targets follow the last arm's
+    return jp.mean(jp.stack(errs))
+
+
 def zero_if_bad(metrics: dict[str, jax.Array], bad: jax.Array) -> dict[str, jax.Array]:
     """A bad step reports 0 for every term but `nan_resets`."""
     return {k: jp.where(bad & (k != "nan_resets"), 0.0, v) for k, v in metrics.items()}
 
 
-__all__ = ["METRICS", "finite", "is_bad", "step_metrics", "zero_if_bad"]
+__all__ = ["METRICS", "ee_sq_err", "finite", "is_bad", "step_metrics", "zero_if_bad"]

@@ -20,6 +20,9 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
         a residual of the observer's estimate). The env adds the estimate of every 4 ms tick to
         the policy's u of the last 20 ms step: between policy steps, pass the observation with
         the tick's u_obs (its last 6 entries), or add the tick's estimate to `residual(obs)`
+    u = u_gravity + u_scale * a where action_scaling.base is 'gravity': u_gravity the arms'
+        weight and its torque about the base's COM at their present pose (from the arm's masses
+        and kinematics; the robot computes it), in the policy's frame: `u(obs, yaw, u_gravity)`
 
 Every size and the layout come from the sidecar: s_body = obs[start:stop] with
 `observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
@@ -185,7 +188,7 @@ class NumpyPolicy:
         self.s_body = s_body  # of the observation
         n_body = s_body.stop - s_body.start
         known = inputs in (["s_body", "z"], ["s_body", "z", "u_obs"]) and frame in ("yaw", "world")
-        known = known and (base == "zero" or (base == "observer" and frame == "yaw"))
+        known = known and (base in ("zero", "gravity") or (base == "observer" and frame == "yaw"))
         if not known or n_body + latent + n_obs != obs_size or s_body.stop > input_size:
             raise ValueError(
                 f"{d / SIDECAR}: s_body = obs[{s_body.start}:{s_body.stop}], latent_size "
@@ -228,7 +231,7 @@ class NumpyPolicy:
     def _obs(self, obs) -> np.ndarray:
         x = np.asarray(obs, np.float64)
         sizes = [self.input_size + _U_OBS_SIZE]
-        if "u_obs" not in self.inputs and self.base == "zero":
+        if "u_obs" not in self.inputs and self.base != "observer":
             sizes.append(self.input_size)
         if x.ndim not in (1, 2) or x.shape[-1] not in sizes:
             raise ValueError(
@@ -269,7 +272,8 @@ class NumpyPolicy:
 
     def residual(self, obs) -> np.ndarray:
         """The policy's own u_scale * a (..., 6) in its frame: u itself where `base` is 'zero',
-        what is added to the observer's estimate where it is 'observer'."""
+        what is added to the observer's estimate (or the arms' gravity wrench) where it is
+        'observer' (or 'gravity')."""
         return self._residual(self._obs(obs))
 
     def _residual(self, x: np.ndarray) -> np.ndarray:
@@ -279,16 +283,30 @@ class NumpyPolicy:
             )
         return self._action(x) * self.scale
 
-    def u(self, obs, yaw=None) -> np.ndarray:
+    def u(self, obs, yaw=None, u_gravity=None) -> np.ndarray:
         """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM: `residual(obs)`, plus
-        the observation's u_obs where `base` is 'observer'. Without `yaw`, in the policy's frame
-        (`frame`), what the ONNX graph gives; with the heading `yaw` (rad; () or (B,)), in the
-        world frame: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau] (a world-frame
-        policy's u as it is)."""
+        the observation's u_obs where `base` is 'observer', or `u_gravity` (..., 6; the arms'
+        weight and its torque at their pose, N and N·m in the policy's frame) where it is
+        'gravity'. Without `yaw`, in the policy's frame (`frame`), what the ONNX graph gives
+        (the residual); with the heading `yaw` (rad; () or (B,)), in the world frame: a
+        yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau] (a world-frame one as it is)."""
         x = self._obs(obs)
         u = self._residual(x)
         if self.base == "observer":  # x holds u_obs (`_obs` checked its size)
             u = u + x[..., self.input_size : self.input_size + _U_OBS_SIZE]
+        if self.base == "gravity" and u_gravity is None:
+            raise ValueError(
+                "This policy's u is added to the arms' gravity wrench (action_scaling.base "
+                "'gravity'): pass u_gravity (..., 6), the arms' weight and its torque about the "
+                "base's COM at their pose, N and N·m in the policy's frame."
+            )
+        if self.base != "gravity" and u_gravity is not None:
+            raise ValueError(
+                f"u_gravity is added only to a policy on the arms' gravity wrench; this policy's "
+                f"base is {self.base!r}: leave u_gravity out."
+            )
+        if u_gravity is not None:
+            u = u + np.broadcast_to(np.asarray(u_gravity, np.float64), u.shape)
         if self.frame == "world" or yaw is None:
             return u
         c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))

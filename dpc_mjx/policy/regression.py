@@ -13,7 +13,8 @@ Fit: the actor's mean action tanh(loc) to clip(u_oracle / u_scale, -0.95, 0.95) 
 the policy's frame, `EnvConfig.u_frame`: turned into the yaw frame by the row's heading), and its
 exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's random-motion
 samples (`Dataset.u_oracle`, collected with MBC; with `EnvConfig.u_base` 'observer' the target is
-u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale, and
+u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale, with
+'gravity' u_oracle - u_gravity, the part the arms' weight at their pose leaves, and
 with `slow_s` > 0 only its fast part: minus its exponential average over `slow_s` seconds along
 each episode, `regression_target`); the
 observation statistics start from the same samples. The last `val_fraction` of the samples are
@@ -40,6 +41,12 @@ from dpc_mjx.policy.policy import observation_size, policy_observation
 from dpc_mjx.stats import r2
 
 U_CLIP = 0.95  # targets stay inside tanh's range
+# What the actor is fitted to, in words, by `EnvConfig.u_base` (`regression_target`)
+REGRESSION_TARGETS = {
+    "zero": "the oracle's u",
+    "observer": "u_oracle - u_obs",
+    "gravity": "u_oracle - u_gravity",
+}
 
 # `trainer` is SAC's (`sac.trainer.Trainer`, `Carry`), taken by what it has, so that this layer
 # imports no SAC: trainer.observation_size, .critic_observation_size, .action_size,
@@ -128,7 +135,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
 ) -> np.ndarray:
     """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
     -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
-    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`). With `slow_s` > 0 (s; one
+    same frame) where `u_base` is 'observer' (`EnvConfig.u_base`), minus the arms' gravity
+    wrench u_gravity (`Dataset.u_gravity`) where it is 'gravity'. With `slow_s` > 0 (s; one
     number, or (force, torque) where 0 keeps that part whole; u_base 'observer' only) the
     residual d = u_oracle - u_obs loses its slow part, its exponential average along each
     episode (`slow_part`): u = d - slow(d), the correction of the observer's lag that a policy
@@ -144,6 +152,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
             u = u - np.where(taus > 0, slow, 0.0)
     elif np.any(taus > 0):
         raise DpcError("slow_s splits the observer's residual: it needs u_base='observer'.")
+    elif u_base == "gravity":  # what the arms' weight at their pose leaves
+        u = u - data.u_gravity_in(u_frame)
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)
 
 

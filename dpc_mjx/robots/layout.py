@@ -54,6 +54,11 @@ class Layout:
         return np.concatenate([a.qpos for a in self.arms]) if self.arms else np.zeros(0, int)
 
     @property
+    def arm_bodies(self) -> np.ndarray:
+        """(n_b,) ids of every arm body (each arm's subtree), arm after arm."""
+        return np.concatenate([a.bodies for a in self.arms]) if self.arms else np.zeros(0, int)
+
+    @property
     def arm_dof(self) -> np.ndarray:
         return np.concatenate([a.dof for a in self.arms]) if self.arms else np.zeros(0, int)
 

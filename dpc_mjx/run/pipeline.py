@@ -38,7 +38,7 @@ from dpc_mjx.io.shipped import (  # noqa: F401 (SHIPPED, SHIPPED_PAPER: their ol
     env_overrides,
     export_cells,
 )
-from dpc_mjx.policy.regression import regress_actor
+from dpc_mjx.policy.regression import REGRESSION_TARGETS, regress_actor
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run import plots
@@ -247,7 +247,7 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                 seed=config.seed,
             )
             reports.append(report)
-            target = "u_oracle - u_obs" if env_config.u_base == "observer" else "the oracle's u"
+            target = REGRESSION_TARGETS[env_config.u_base]
             slow = f" less its slow part ({config.residual_slow_s} s)" * config.splits_residual
             r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
             print(
