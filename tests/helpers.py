@@ -21,6 +21,15 @@ FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive
 ENGINE = "native"
 
 
+# Env options of a robot standing still: standing gait, no commands, no pushes, exact sensors
+STANDING_STILL = {
+    "gait": "stand",
+    "push_force": (0.0, 0.0),
+    "sensor_noise": 0.0,
+    "sensor_delay": 0,
+    **{k: (0.0, 0.0) for k in ("command_vx", "command_vy", "command_yaw")},
+}
+
 _JIT = jax.jit
 
 

@@ -5,7 +5,7 @@ the policy's u (its regression target: tests/test_u_base.py)."""
 import jax
 import jax.numpy as jp
 import numpy as np
-from helpers import ENGINE, FAST_COMPILE
+from helpers import ENGINE, FAST_COMPILE, STANDING_STILL
 
 import dpc_mjx
 from dpc_mjx.control.controller import gravity_u
@@ -40,13 +40,9 @@ def test_an_arm_held_still_loads_its_mount_with_its_gravity_wrench():
         arm="z1",
         controller="mbc",
         engine=ENGINE,
-        gait="stand",
         reach_fraction=0.0,
-        push_force=(0.0, 0.0),
         payload_mass=(0.0, 0.0),
-        sensor_noise=0.0,
-        sensor_delay=0,
-        **{k: (0.0, 0.0) for k in ("command_vx", "command_vy", "command_yaw")},
+        **STANDING_STILL,
     )
     reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)
     step = jax.jit(jax.vmap(env.step), compiler_options=FAST_COMPILE)

@@ -399,21 +399,26 @@ def test_observer_input_policy_round_trips_and_runs_in_numpy(trained, tmp_path):
         dio.load(out)
 
 
+def _regular_export(trained, out: pathlib.Path, env_config: EnvConfig) -> pathlib.Path:
+    """The trained policy with its `regular` encoder exported to `out` under `env_config`."""
+    return dio.export(
+        out,
+        adapter_config=CONFIG,
+        policy=trained["policy"],
+        decoder=trained["decoder"],
+        encoders={"regular": trained["encoders"]["regular"]},
+        arms={"regular": "regular"},
+        env_config=env_config,
+    )
+
+
 def test_a_policy_on_the_observer_adds_u_obs_in_numpy_as_the_env_does(trained, exported, tmp_path):
     """u_base='observer': the sidecar records the base and the observer, and the numpy runner's
     u is the observation's u_obs plus the policy's u_scale * a, turned by the heading: by
     linearity the env's u of a tick, the tick's estimate (world) plus the policy's u turned
     (`DpcEnv.controller_u`, `LowLevelController.step(add_estimate=True)`)."""
     config = ENV_CONFIG.replace(u_base="observer", observer_gain=40.0)
-    out = dio.export(
-        tmp_path / "residual",
-        adapter_config=CONFIG,
-        policy=trained["policy"],
-        decoder=trained["decoder"],
-        encoders={"regular": trained["encoders"]["regular"]},
-        arms={"regular": "regular"},
-        env_config=config,
-    )
+    out = _regular_export(trained, tmp_path / "residual", config)
     scaling = json.loads((out / "dpc.json").read_text())["action_scaling"]
     assert scaling["base"] == "observer" and scaling["observer"]["gain"] == 40.0
     obs = _obs(N_IN["regular"] + 6, seed=13)  # [s_body, s_arm, p_arm, u_obs (yaw frame)]
@@ -437,15 +442,7 @@ def test_a_policy_on_gravity_adds_the_given_gravity_wrench_in_numpy(trained, exp
     gravity wrench (the policy's frame) plus the policy's u_scale * a, then turned by the
     heading, as the env adds `DpcEnv.arm_gravity` (world) to the policy's u turned; without the
     wrench it refuses, and a policy of another base refuses one."""
-    out = dio.export(
-        tmp_path / "gravity",
-        adapter_config=CONFIG,
-        policy=trained["policy"],
-        decoder=trained["decoder"],
-        encoders={"regular": trained["encoders"]["regular"]},
-        arms={"regular": "regular"},
-        env_config=ENV_CONFIG.replace(u_base="gravity"),
-    )
+    out = _regular_export(trained, tmp_path / "gravity", ENV_CONFIG.replace(u_base="gravity"))
     assert json.loads((out / "dpc.json").read_text())["action_scaling"]["base"] == "gravity"
     obs = _obs(N_IN["regular"] + 6, seed=17)
     yaw = np.linspace(-3.0, 3.0, len(obs))

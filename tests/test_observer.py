@@ -15,7 +15,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
-from helpers import ENGINE, FAST_COMPILE
+from helpers import ENGINE, FAST_COMPILE, STANDING_STILL
 
 import dpc_mjx
 from dpc_mjx import DpcError, sim
@@ -258,11 +258,7 @@ def test_env_observer_follows_the_oracles_vertical_force():
         arm="regular",
         controller="observer",
         engine=ENGINE,
-        gait="stand",
-        push_force=(0.0, 0.0),
-        sensor_noise=0.0,
-        sensor_delay=0,
-        **{k: (0.0, 0.0) for k in ("command_vx", "command_vy", "command_yaw")},
+        **STANDING_STILL,
     )
     reset = jax.jit(jax.vmap(env.reset), compiler_options=FAST_COMPILE)
     step = jax.jit(jax.vmap(env.step), compiler_options=FAST_COMPILE)

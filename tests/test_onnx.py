@@ -154,19 +154,24 @@ def test_observer_input_world_frame_export(tmp_path):
     assert np.abs(session.run(None, {"observation": changed})[0] - u).max() > 1e-3
 
 
-def test_a_policy_on_the_observer_adds_u_obs_in_the_graph(tmp_path):
-    """u_base='observer': the graph's u is u_obs + u_scale * a, as `NumpyPolicy.u(obs)`."""
-    ort = pytest.importorskip("onnxruntime")
+def _shipped_z1_export(out: pathlib.Path, env_config: EnvConfig) -> pathlib.Path:
+    """The shipped policy with its `z1` encoder exported to `out` under `env_config`."""
     art = load(SHIPPED)
-    out = export(
-        tmp_path / "residual",
+    return export(
+        out,
         adapter_config=art.adapter_config,
         policy=art.policy,
         decoder=art.decoder,
         encoders={"z1": art.encoder("z1")},
         arms={"z1": art.arm_spec("z1")},
-        env_config=EnvConfig(u_base="observer"),
+        env_config=env_config,
     )
+
+
+def test_a_policy_on_the_observer_adds_u_obs_in_the_graph(tmp_path):
+    """u_base='observer': the graph's u is u_obs + u_scale * a, as `NumpyPolicy.u(obs)`."""
+    ort = pytest.importorskip("onnxruntime")
+    out = _shipped_z1_export(tmp_path / "residual", EnvConfig(u_base="observer"))
     model = onnx_graph.onnx_model(out, "z1")
     session = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
     obs = _observations()["z1"]
@@ -182,16 +187,7 @@ def test_a_policy_on_gravity_gives_its_residual_in_the_graph(tmp_path):
     """u_base='gravity': the graph's u is u_scale * a, `NumpyPolicy.residual(obs)`; the robot adds
     its arms' gravity wrench (the graph has no kinematics)."""
     ort = pytest.importorskip("onnxruntime")
-    art = load(SHIPPED)
-    out = export(
-        tmp_path / "gravity",
-        adapter_config=art.adapter_config,
-        policy=art.policy,
-        decoder=art.decoder,
-        encoders={"z1": art.encoder("z1")},
-        arms={"z1": art.arm_spec("z1")},
-        env_config=EnvConfig(u_base="gravity"),
-    )
+    out = _shipped_z1_export(tmp_path / "gravity", EnvConfig(u_base="gravity"))
     session = ort.InferenceSession(
         onnx_graph.onnx_model(out, "z1").SerializeToString(), providers=["CPUExecutionProvider"]
     )
