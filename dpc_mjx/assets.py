@@ -15,7 +15,7 @@ is not in the installed package.
 
 The 440 MB wheel is optional (`pip install 'dpc_mjx[urdf]'`): `wheel_urdf` finds its other robots'
 URDFs, through the installed distribution's file list (no path of this machine is hard-coded and
-nothing is downloaded), e.g. to mount one as your own arm (`dpc_mjx.robots.arm_file`; its STL
+nothing is downloaded), e.g. to mount one as your own arm (`dpc_mjx.robots.arms.file`; its STL
 meshes are drawn), `UrdfArm(str(wheel_urdf("so_arm_description/urdf/so101.urdf")))`.
 """
 

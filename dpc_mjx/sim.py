@@ -50,7 +50,7 @@ def batched_data(
 def make_rollout(mx: mjx.Model, n_steps: int, model_axes=None) -> Callable[[mjx.Data], mjx.Data]:
     """jit(vmap(n_steps x mjx.step)) over a batch of data (ctrl held constant).
 
-    With `model_axes` (an in_axes tree from `dpc_mjx.robots.params`), `mx` is a batched model
+    With `model_axes` (an in_axes tree from `dpc_mjx.robots.arms.params`), `mx` is a batched model
     and the returned function takes `(data)` with the model closed over per batch element.
     """
 

@@ -27,7 +27,7 @@ from dpc_mjx.envs.model_batch import ModelBatchEnv
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.robots.arms import ArmSpec
-from dpc_mjx.robots.params import batch_arm_params
+from dpc_mjx.robots.arms.params import batch_arm_params
 from dpc_mjx.timing import Stopwatch, run_calls
 
 CHUNK = 50  # env steps per jitted call

@@ -3,8 +3,8 @@
     python experiments/wheel_bases.py [--robots anymal_c solo12 ...] [--arms none regular]
         [--envs 16] [--seconds 10] [--seed 0] [--engine native]
 
-Each file is read by `dpc_mjx.robots.base_file.read_base` (fixed links whose inertia MuJoCo
-refuses fused, `robots.urdf_fuse`, named under "fused"); one it refuses is listed with the
+Each file is read by `dpc_mjx.robots.bases.file.read_base` (fixed links whose inertia MuJoCo
+refuses fused, `robots.bases.fuse`, named under "fused"); one it refuses is listed with the
 refusal. One it reads is trotted as `experiments/base_trot.py` trots a named base (`trot_cell`:
 `--envs` envs of the reaching task, pushes off, 0.3 m/s forward, the arm's reaching motion,
 `--seconds` of MBC) with each of `--arms`: falls of `--envs` and the forward speed's RMS error to
@@ -25,7 +25,7 @@ import warnings
 from base_trot import trot_cell
 
 from dpc_mjx import DpcError, assets
-from dpc_mjx.robots.base_file import read_base
+from dpc_mjx.robots.bases.file import read_base
 
 SPEED_TOL = 0.1  # m/s: a cell trots with 0 falls and a v_x RMSE below this (tests/test_bases.py)
 QUADRUPEDS = {  # name: the URDF under the wheel's robots/ folder
@@ -53,7 +53,7 @@ def _short(message: str, robots: str) -> str:
 
 
 def _fused(f) -> str:
-    """A `urdf_fuse.Fused` in a cell: how many links into which, and whose inertia was refused."""
+    """A `bases.fuse.Fused` in a cell: how many links into which, and whose inertia was refused."""
     return f"{len(f.links)} link(s) into {f.into} (refused: {', '.join(f.refused)})"
 
 

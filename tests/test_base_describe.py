@@ -1,5 +1,5 @@
-"""`dpc-mjx base FILE` (`dpc_mjx.robots.base_describe`): what `read_base` inferred, as text, and the
-JSON file that reproduces it. MuJoCo C and numpy only: nothing here compiles a JAX program."""
+"""`dpc-mjx base FILE` (`dpc_mjx.robots.bases.describe`): what `read_base` inferred, as text, and
+the JSON file that reproduces it. MuJoCo C and numpy only: nothing here compiles a JAX program."""
 
 import json
 
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from dpc_mjx import DpcError
-from dpc_mjx.robots.base_describe import describe, description
-from dpc_mjx.robots.base_file import LEGS, NAMED_BASES, BaseSpec, base_file_path, read_base
+from dpc_mjx.robots.bases.describe import describe, description
+from dpc_mjx.robots.bases.file import LEGS, NAMED_BASES, BaseSpec, base_file_path, read_base
 from dpc_mjx.run import cli
 from dpc_mjx.serialization import write_json
 

@@ -1,4 +1,4 @@
-"""Bases read from their files (`dpc_mjx.robots.base_file`), checked against the files themselves:
+"""Bases read from their files (`dpc_mjx.robots.bases.file`), checked against the files themselves:
 the URDF's XML read here, and a MuJoCo C model compiled here from the file as it is (root link and
 all). MuJoCo C and numpy only: nothing here compiles a JAX program."""
 
@@ -11,8 +11,12 @@ import numpy as np
 import pytest
 
 from dpc_mjx import DpcError, assets
-from dpc_mjx.robots import a1, arm_file, base_file, build
-from dpc_mjx.robots.base_file import (
+from dpc_mjx.robots import build
+from dpc_mjx.robots.arms import REFERENCE_TRUNK_HALF_EXTENTS
+from dpc_mjx.robots.arms import file as arm_file
+from dpc_mjx.robots.bases import a1
+from dpc_mjx.robots.bases import file as base_file
+from dpc_mjx.robots.bases.file import (
     LEGS,
     MESHES,
     NAMED_BASES,
@@ -24,9 +28,9 @@ from dpc_mjx.robots.urdf import strip_meshes
 
 _MASS_TOL = 1e-5  # kg: the file's masses summed vs the spec's (Go1's, B1's 1e-6 kg roots dropped)
 _FOOT_TOL = 1e-5  # m: a home foot's centre vs its target (the solver stops within 1e-6 m)
-_EXACT = 1e-9  # m, rad: values copied from the file or from robots.a1
+_EXACT = 1e-9  # m, rad: values copied from the file or from robots.bases.a1
 _ABDUCTION_TOL = 1e-6  # rad: a home hip ab/adduction left at 0 (the solver stops within 1e-6 m)
-_A1_HOME_ANGLE_TOL = 0.01  # rad: the solved A1 home vs robots.a1.HOME_LEG (0.9, -1.8 at 0.27 m)
+_A1_HOME_ANGLE_TOL = 0.01  # rad: the solved A1 home vs bases.a1.HOME_LEG (0.9, -1.8 at 0.27 m)
 _UNITREE_PARTS = ("hip", "thigh", "calf")  # Unitree's names: {place}_{part}_joint, hip to knee
 _BASES = ("a1", "b1", "go1", "go2")  # the named bases alone (b1-z1: the B1 with its Z1, below)
 
@@ -130,6 +134,7 @@ def test_the_a1_read_from_its_file_is_robots_a1():
     assert spec.home_height == pytest.approx(a1.HOME_HEIGHT, abs=_EXACT)
     assert spec.foot_radius == pytest.approx(a1.FOOT_RADIUS, abs=_EXACT)
     np.testing.assert_allclose(spec.trunk_half_extents, a1.TRUNK_HALF_EXTENTS, atol=_EXACT)
+    assert REFERENCE_TRUNK_HALF_EXTENTS == a1.TRUNK_HALF_EXTENTS  # the mounts' box is the A1's
     np.testing.assert_allclose(spec.trunk_box_center, 0.0, atol=_EXACT)
     np.testing.assert_allclose(spec.home_qpos, a1.home_leg_qpos(), atol=_A1_HOME_ANGLE_TOL)
 
@@ -278,7 +283,7 @@ def test_the_z1_split_from_b1_z1_is_the_z1_arm(tmp_path):
 def test_home_stands_where_the_legs_hang_sideways_and_from_a_bent_knee(file, monkeypatch):
     """Feet on the floor under the thigh joint fore-aft, sideways where they hang at the zero
     pose (ANYmal C's shank is offset outboard); a leg straight at the zero pose (Solo 12's) is
-    solved again from a bent knee (`base_measure.solve_home`). Solo 12's file declares
+    solved again from a bent knee (`bases.measure.solve_home`). Solo 12's file declares
     placeholder efforts, refused below; the home pose does not depend on them."""
     monkeypatch.setattr(base_file, "check_efforts", lambda *args: None)
     spec = read_base(assets.wheel_urdf(file))

@@ -1,4 +1,4 @@
-"""Bases read from MJCF files (`dpc_mjx.robots.base_mjcf`): the shipped A1's URDF as MuJoCo
+"""Bases read from MJCF files (`dpc_mjx.robots.bases.mjcf_tree`): the shipped A1's URDF as MuJoCo
 converts it to MJCF (`mj_saveLastXML`, no internet needed), and the same A1 rewritten as a
 Menagerie-style file (free joint, degrees, motors, visual meshes, sites, sensors, keyframe, floor,
 options), each read and built as the URDF is. MuJoCo C and numpy, but one env stepped twice."""
@@ -18,9 +18,9 @@ from helpers import FAST_COMPILE
 
 import dpc_mjx
 from dpc_mjx import DpcError, assets
-from dpc_mjx.robots.base_describe import description
-from dpc_mjx.robots.base_file import LEGS, arm_urdf, base_file_path, read_base
-from dpc_mjx.robots.base_model import base_mjspec
+from dpc_mjx.robots.bases.describe import description
+from dpc_mjx.robots.bases.file import LEGS, arm_urdf, base_file_path, read_base
+from dpc_mjx.robots.bases.model import base_mjspec
 from dpc_mjx.robots.urdf import strip_meshes
 
 _EXACT = 1e-9  # kg, N·m, m: values the MJCF carries as the URDF has them

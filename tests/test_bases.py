@@ -25,7 +25,7 @@ from dpc_mjx.io.inference import NumpyPolicy
 from dpc_mjx.io.shipped import SHIPPED, export_cells, shipped_for
 from dpc_mjx.robots import VARIANTS, arm_name, build, layout
 from dpc_mjx.robots.assemble import mount_on
-from dpc_mjx.robots.base_file import LEGS, base_file_path, read_base
+from dpc_mjx.robots.bases.file import LEGS, base_file_path, read_base
 from dpc_mjx.run import cli
 
 CHECK = {

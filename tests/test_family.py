@@ -8,7 +8,7 @@ import pytest
 from dpc_mjx import DpcError
 from dpc_mjx.adapter import Dataset
 from dpc_mjx.robots.arms import ArmSpec, UrdfArm
-from dpc_mjx.robots.family import LINK_MASSES, ArmFamily
+from dpc_mjx.robots.arms.family import LINK_MASSES, ArmFamily
 from dpc_mjx.robots.variants import VARIANTS
 from dpc_mjx.run import training_arms
 from dpc_mjx.run.config import RunConfig

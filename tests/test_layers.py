@@ -15,11 +15,13 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGE = "dpc_mjx"
 
 
-def _contract_layers() -> list[str]:
-    """The layers of the one layers contract, top to bottom, as written ('deploy | sac', ...)."""
+def _contract_layers(container: str = PACKAGE) -> list[str]:
+    """The layers of the layers contract of `container` (the library's, or a package's inside
+    it), top to bottom, as written ('deploy | sac', ...)."""
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
-    (contract,) = [c for c in config["contracts"] if c["type"] == "layers"]
-    assert contract["containers"] == [PACKAGE] and contract["exhaustive"]
+    layered = [c for c in config["contracts"] if c["type"] == "layers"]
+    (contract,) = [c for c in layered if c["containers"] == [container]]
+    assert contract["exhaustive"]
     return contract["layers"]
 
 
@@ -78,9 +80,26 @@ def test_the_contract_refuses_an_upward_import():
     graph = grimp.build_graph(PACKAGE, cache_dir=None)
     check = {"layers": layers, "containers": {PACKAGE}}
     assert not graph.find_illegal_dependencies_for_layers(**check)
-    graph.add_import(importer="dpc_mjx.robots.a1", imported="dpc_mjx.policy.policy")
+    graph.add_import(importer="dpc_mjx.robots.bases.a1", imported="dpc_mjx.policy.policy")
     (broken,) = graph.find_illegal_dependencies_for_layers(**check)
     assert (broken.importer, broken.imported) == ("dpc_mjx.robots", "dpc_mjx.policy")
+
+
+def test_the_robots_contract_keeps_arms_and_bases_apart():
+    """Inside `robots`: the assembly above the arms and the bases, which import neither each other
+    nor the assembly, above the file reading they share; broken by an arm that imports a base."""
+    robots = f"{PACKAGE}.robots"
+    layers = [
+        grimp.Layer(*names, independent=ind)
+        for names, ind in map(_names, _contract_layers(robots))
+    ]
+    assert layers[1].independent and set(layers[1].module_tails) == {"arms", "bases"}
+    graph = grimp.build_graph(PACKAGE, cache_dir=None)
+    check = {"layers": layers, "containers": {robots}}
+    assert not graph.find_illegal_dependencies_for_layers(**check)
+    graph.add_import(importer=f"{robots}.arms.mount", imported=f"{robots}.bases.a1")
+    (broken,) = graph.find_illegal_dependencies_for_layers(**check)
+    assert (broken.importer, broken.imported) == (f"{robots}.arms", f"{robots}.bases")
 
 
 def test_the_architecture_page_draws_the_layers_of_the_contract():
@@ -151,8 +170,8 @@ def test_no_import_cycle_among_the_modules():
     graph = grimp.build_graph(PACKAGE, cache_dir=None)
     cycles = _cycles(_runtime_edges(graph))
     assert not cycles, f"modules that import each other in a circle: {cycles}"
-    # the check finds one: robots.a1 -> run.cli -> ... -> robots.a1
-    graph.add_import(importer="dpc_mjx.robots.a1", imported="dpc_mjx.run.cli")
+    # the check finds one: robots.bases.file -> run.cli -> ... -> robots.bases.file
+    graph.add_import(importer="dpc_mjx.robots.bases.file", imported="dpc_mjx.run.cli")
     assert _cycles(_runtime_edges(graph))
 
 

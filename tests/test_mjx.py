@@ -16,8 +16,8 @@ from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.robots import VARIANTS, build
+from dpc_mjx.robots.arms.params import batch_arm_params
 from dpc_mjx.robots.layout import layout, mount_wrench
-from dpc_mjx.robots.params import batch_arm_params
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 from dpc_mjx.rotations import roll_pitch_yaw
 

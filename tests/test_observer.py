@@ -26,7 +26,7 @@ from dpc_mjx.control.state import BodyState, read_state
 from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.physics import NativePhysics
 from dpc_mjx.robots import build
-from dpc_mjx.robots.a1 import FOOT_RADIUS
+from dpc_mjx.robots.bases.a1 import FOOT_RADIUS
 from dpc_mjx.robots.standing import perturbed_home
 from dpc_mjx.rotations import skew_np
 

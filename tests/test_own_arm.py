@@ -25,7 +25,7 @@ from dpc_mjx.robots import (
     layout,
     resolve,
 )
-from dpc_mjx.robots.arm_file import read
+from dpc_mjx.robots.arms.file import read
 from dpc_mjx.run import cli
 from dpc_mjx.run.eval import evaluate
 from dpc_mjx.run.pipeline import SHIPPED, evaluate_export, transfer_arm

@@ -29,7 +29,7 @@ EPISODES, STEPS, SEED = 2, 10, 3
 CONTROLLER = "dpc"
 # Per-episode return of a grid point vs the same arm compiled as its own variant, after STEPS
 # steps: the batched model leaves body_invweight0/dof_invweight0 (constraint regularisation
-# scales) at the base arm's values (`robots.params`). Measured on MBC's episodes (FAST_COMPILE,
+# scales) at the base arm's values (`robots.arms.params`). Measured on MBC's episodes (FAST_COMPILE,
 # jax 0.9.2): the grid point within 1.0e-4 of `longer`, `regular` 2.0e-3 away from it; DPC's
 # episodes (the test since 2026-12-02) pass the same tolerance.
 RETURN_RTOL = 5e-4

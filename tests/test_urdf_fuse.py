@@ -1,5 +1,5 @@
 """Fixed links whose inertia MuJoCo refuses, fused into the link they hang from
-(`dpc_mjx.robots.urdf_fuse`): the sum checked against MuJoCo C's own fusion of static bodies, a
+(`dpc_mjx.robots.bases.fuse`): the sum checked against MuJoCo C's own fusion of static bodies, a
 base whose only fault is such a link reads and builds (with a warning naming it), and a link a
 joint moves with an impossible inertia is refused by name. MuJoCo C and numpy only."""
 
@@ -11,9 +11,9 @@ import pytest
 
 from dpc_mjx import DpcError, assets
 from dpc_mjx.robots import build
-from dpc_mjx.robots.base_describe import describe
-from dpc_mjx.robots.base_file import base_file_path, read_base
-from dpc_mjx.robots.urdf_fuse import combine, read_inertial, refused, rpy_matrix
+from dpc_mjx.robots.bases.describe import describe
+from dpc_mjx.robots.bases.file import base_file_path, read_base
+from dpc_mjx.robots.bases.fuse import combine, read_inertial, refused, rpy_matrix
 from dpc_mjx.run import cli
 
 _MASS_TOL = 1e-9  # kg: sums of a few masses in float64

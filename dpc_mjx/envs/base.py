@@ -1,4 +1,5 @@
-"""`DpcEnv`: one A1-with-arms env in MJX behind the brax `Env` API, unbatched and pure.
+"""`DpcEnv`: one env of a quadruped (any base) and its arms behind the brax `Env` API, unbatched
+and pure.
 
 One env step (50 Hz) = redraw due disturbances, then `n_substeps` x [controller tick -> physics
 step] at the physics rate (250 Hz), with u chosen by `config.controller`. The physics step is
@@ -79,7 +80,7 @@ _GAITS = {"trot": gait.trot, "stand": gait.stand}
 
 
 class DpcEnv(Env):
-    """A1 + arm(s) + low-level controller; `reset(rng)` / `step(state, action)` on one env."""
+    """Base + arm(s) + low-level controller; `reset(rng)` / `step(state, action)` on one env."""
 
     def __init__(self, config: EnvConfig, arm: str | Arm | RobotSpec = "regular"):
         config.validate()
@@ -363,7 +364,7 @@ class DpcEnv(Env):
         return yaw_of(d.xmat[self.controller.idx.trunk])
 
     def _com_pos(self, d) -> jax.Array:
-        """(3,) m, world: the A1 (trunk + legs) COM, as the controller sees it."""
+        """(3,) m, world: the base (trunk + legs) COM, as the controller sees it."""
         idx = self.controller.idx
         offset = jp.asarray(idx.com_offset, jp.float32)
         return d.xpos[idx.trunk] + d.xmat[idx.trunk] @ offset

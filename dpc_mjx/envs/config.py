@@ -87,9 +87,9 @@ class EnvConfig:
     # on one CPU device, MJX on an accelerator: `physics.resolve_engine`); a built env's
     # `config.engine` is the one it resolved to
     engine: str = "auto"
-    # The quadruped: a name of `robots.base_file.NAMED_BASES` ('a1', 'go1', 'go2', 'b1', 'b1-z1')
+    # The quadruped: a name of `robots.bases.file.NAMED_BASES` ('a1', 'go1', 'go2', 'b1', 'b1-z1')
     # or the path of its .urdf, MJCF .xml (or .json) file, read when the env is built
-    # (`robots.base_model`).
+    # (`robots.bases.model`).
     # `make` / `get_config` scale the pushes, payloads and u's bounds below by the base's weight
     # (`envs.registry.WEIGHT_SCALED`); the numbers written here are the A1's.
     base: str = "a1"

@@ -1,7 +1,7 @@
 """`ModelBatchEnv`: one env stepped on a batch of models, env i on model i, in one compile.
 
 The models differ only in continuous values (an arm's upper-arm length and gripper mass:
-`robots.params.batch_arm_params`), so `jax.vmap` runs the unbatched `DpcEnv` over the batched
+`robots.arms.params.batch_arm_params`), so `jax.vmap` runs the unbatched `DpcEnv` over the batched
 fields of one `mjx.Model` and the unbatched rest; a sweep over a grid of arms is one program:
 
     mx, in_axes = batch_arm_params(env.mx, env.model, upper_arm_length=L, gripper_mass=m)
@@ -36,7 +36,7 @@ class ModelBatchEnv:
         if len(sizes) != 1:
             raise DpcError(
                 f"ModelBatchEnv needs one batch size across the batched model fields, got "
-                f"{sorted(sizes)}; build the batch with robots.params.batch_arm_params."
+                f"{sorted(sizes)}; build the batch with robots.arms.params.batch_arm_params."
             )
         self.env, self.mx, self.in_axes = env, mx, in_axes
         self.size = sizes.pop()  # B
@@ -64,7 +64,7 @@ class ModelBatchEnv:
 
 def on_model(env: DpcEnv, mx: mjx.Model) -> DpcEnv:
     """`env` on `mx`, a model of the same structure with other continuous values (one element
-    of `robots.params.batch_arm_params`'s batch, inside `jax.vmap`). Physics, the data and the
+    of `robots.arms.params.batch_arm_params`'s batch, inside `jax.vmap`). Physics, the data and the
     end-effector Jacobians use `mx`; the controller keeps its model of the bare base, which an
     arm's parameters do not touch. MJX engine only (the native engine steps the one compiled
     `MjModel`)."""

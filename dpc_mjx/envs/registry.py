@@ -33,7 +33,7 @@ from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import carrying, lifting, pushing, reaching
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.base_file import BaseSpec, read_base
+from dpc_mjx.robots.bases.file import BaseSpec, read_base
 from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 
 LEGACY_PREFIX = "a1_arm/"  # tasks' names before any base: "a1_arm/reaching" is "reaching"
@@ -122,7 +122,7 @@ def make(
 ) -> DpcEnv:
     """The unbatched env `name` (e.g. "reaching") with arm variant `arm` (a name of
     `dpc_mjx.robots.VARIANTS`, an ArmSpec/UrdfArm or a RobotSpec; None: the task's default arm,
-    `default_arm(name)`) on the quadruped `base` (a name of `robots.base_file.NAMED_BASES`, the
+    `default_arm(name)`) on the quadruped `base` (a name of `robots.bases.file.NAMED_BASES`, the
     path of its .urdf, .xml or .json file, or a BaseSpec; None: the RobotSpec's, the A1) and config
     `overrides`."""
     task = _task(name)

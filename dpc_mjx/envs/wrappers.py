@@ -78,7 +78,7 @@ def wrap_for_training(
     if randomization_fn is not None:
         raise DpcError(
             "randomization_fn is not supported by DpcEnv (it has no brax `sys`); vary arm "
-            "parameters with a batched mjx.Model (dpc_mjx.robots.params) instead."
+            "parameters with a batched mjx.Model (dpc_mjx.robots.arms.params) instead."
         )
     if episode_length is None:
         episode_length = env.unwrapped.config.episode_length

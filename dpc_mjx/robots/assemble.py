@@ -8,9 +8,12 @@ import os
 import mujoco
 import numpy as np
 
-from dpc_mjx.robots import a1, arms, base_model
+from dpc_mjx.robots import arms
 from dpc_mjx.robots.arms import Mount
-from dpc_mjx.robots.base_file import BaseSpec
+from dpc_mjx.robots.arms.mount import REFERENCE_TRUNK_HALF_EXTENTS, arm_prefix
+from dpc_mjx.robots.bases import model as base_model
+from dpc_mjx.robots.bases.file import BaseSpec
+from dpc_mjx.robots.urdf import VISUAL_GROUP_SITES
 from dpc_mjx.robots.variants import Arm, RobotSpec, on_base, resolve
 
 Base = str | os.PathLike | BaseSpec  # a named base, a file's path or a spec
@@ -22,11 +25,6 @@ HOME_KEY = "home"
 TIMESTEP = 0.004  # s; the policy's 50 Hz is 5 physics steps
 SOLVER_ITERATIONS = 4
 LS_ITERATIONS = 8
-
-
-def arm_prefix(i: int) -> str:
-    """Name prefix of everything belonging to arm `i` (joints, actuators, sites, sensors)."""
-    return f"arm{i}/"
 
 
 def robot_spec(arm: str | Arm | RobotSpec, base: Base | None = None) -> mujoco.MjSpec:
@@ -55,7 +53,7 @@ def assemble(robot: RobotSpec) -> mujoco.MjSpec:
             name=f"{arm_prefix(i)}mount_frame",
             pos=list(mount.pos),
             quat=[math.cos(mount.yaw / 2), 0, 0, math.sin(mount.yaw / 2)],
-            group=base_model.VISUAL_GROUP_SITES,
+            group=VISUAL_GROUP_SITES,
         )
         spec.attach(arms.arm_spec(arm), prefix=arm_prefix(i), site=site)
 
@@ -71,31 +69,36 @@ def assemble(robot: RobotSpec) -> mujoco.MjSpec:
     return spec
 
 
+# The scene's textures (as MuJoCo Menagerie's scenes): a gradient sky and the floor's checkers.
+_SCENE_TEXTURES = {
+    "skybox": {
+        "type": mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        "builtin": mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+        "rgb1": [0.3, 0.5, 0.7],
+        "rgb2": [0, 0, 0],
+        "width": 512,
+        "height": 3072,
+    },
+    "groundplane": {
+        "type": mujoco.mjtTexture.mjTEXTURE_2D,
+        "builtin": mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        "rgb1": [0.2, 0.3, 0.4],
+        "rgb2": [0.1, 0.2, 0.3],
+        "mark": mujoco.mjtMark.mjMARK_EDGE,
+        "markrgb": [0.8, 0.8, 0.8],
+        "width": 300,
+        "height": 300,
+    },
+}
+
+
 def add_scene(spec: mujoco.MjSpec) -> mujoco.MjSpec:
     """Add the floor, light, sky and a tracking camera to `spec` (in place) and return it."""
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     spec.visual.global_.azimuth = 120
     spec.visual.global_.elevation = -20
-    spec.add_texture(
-        name="skybox",
-        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
-        builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
-        rgb1=[0.3, 0.5, 0.7],
-        rgb2=[0, 0, 0],
-        width=512,
-        height=3072,
-    )
-    spec.add_texture(
-        name="groundplane",
-        type=mujoco.mjtTexture.mjTEXTURE_2D,
-        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
-        rgb1=[0.2, 0.3, 0.4],
-        rgb2=[0.1, 0.2, 0.3],
-        mark=mujoco.mjtMark.mjMARK_EDGE,
-        markrgb=[0.8, 0.8, 0.8],
-        width=300,
-        height=300,
-    )
+    for name, texture in _SCENE_TEXTURES.items():
+        spec.add_texture(name=name, **texture)
     mat = spec.add_material(name="groundplane", texrepeat=[5, 5], texuniform=True, reflectance=0.2)
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "groundplane"
     world = spec.worldbody
@@ -128,10 +131,10 @@ def mount_on(base: BaseSpec, mount: Mount) -> Mount:
     place of `base`'s trunk box: each coordinate scaled by the ratio of the boxes' half extents,
     about the box's centre. On a base with the A1's box it is `mount` itself."""
     half, center = base.trunk_half_extents, base.trunk_box_center
-    if half == a1.TRUNK_HALF_EXTENTS and not any(center):
+    if half == REFERENCE_TRUNK_HALF_EXTENTS and not any(center):
         return mount
     pos = tuple(
-        c + p * h / h1 for c, p, h, h1 in zip(center, mount.pos, half, a1.TRUNK_HALF_EXTENTS)
+        c + p * h / h1 for c, p, h, h1 in zip(center, mount.pos, half, REFERENCE_TRUNK_HALF_EXTENTS)
     )
     return Mount(pos, mount.yaw)
 

@@ -1,6 +1,6 @@
 """Index layout of a compiled variant: where legs, arms, feet and sensors live in qpos/qvel/ctrl.
 
-Everything here is static (numpy ints), computed once from the names `robots.base_model` gives
+Everything here is static (numpy ints), computed once from the names `robots.bases.model` gives
 every base's parts (whatever its file calls them), and safe to close over in jit.
 """
 
@@ -12,9 +12,10 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import arms, base_model
-from dpc_mjx.robots.assemble import arm_prefix
-from dpc_mjx.robots.base_file import LEGS
+from dpc_mjx.robots import arms
+from dpc_mjx.robots.arms.mount import arm_prefix
+from dpc_mjx.robots.bases import model as base_model
+from dpc_mjx.robots.bases.file import LEGS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,7 +37,7 @@ class ArmLayout:
 class Layout:
     """A compiled variant's indices (see `layout`)."""
 
-    leg_joints: np.ndarray  # (12,) joint ids, legs in base_file.LEGS order, each hip, thigh, calf
+    leg_joints: np.ndarray  # (12,) joint ids, legs in bases.file.LEGS order, each hip, thigh, calf
     leg_qpos: np.ndarray  # (12,) in leg_joints order
     leg_dof: np.ndarray  # (12,)
     leg_act: np.ndarray  # (12,) torque motors, N·m

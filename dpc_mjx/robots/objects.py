@@ -33,8 +33,12 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import arms, base_model
-from dpc_mjx.robots.assemble import arm_prefix, build_spec
+from dpc_mjx.robots import arms
+from dpc_mjx.robots.arms.mount import arm_prefix
+from dpc_mjx.robots.arms.parametric import FINGER_LENGTH
+from dpc_mjx.robots.assemble import build_spec
+from dpc_mjx.robots.bases import model as base_model
+from dpc_mjx.robots.urdf import VISUAL_GROUP_SITES
 from dpc_mjx.robots.variants import Arm, RobotSpec
 
 # Contact bits (see the table above).
@@ -47,7 +51,7 @@ EE_CONTYPE, EE_CONAFFINITY = 0, EE_BIT
 # Defaults that come from the gripper or the builders, not from a task (m).
 BALL_RADIUS = 0.02  # fits between the open jaws (0.044 m apart)
 BALL_FRICTION = (0.8, 0.005, 0.0005)  # sliding, torsional, rolling (condim 6: balls stop rolling)
-GRASP_OFFSET = (-arms.FINGER_LENGTH / 2, 0.0, 0.0)  # ee-body frame, from the ee site: mid-jaw
+GRASP_OFFSET = (-FINGER_LENGTH / 2, 0.0, 0.0)  # ee-body frame, from the ee site: mid-jaw
 TABLE_THICKNESS = 0.02  # of a table's top
 
 _BOX_RGBA, _TABLE_RGBA, _BALL_RGBA = [0.7, 0.5, 0.3, 1], [0.55, 0.45, 0.35, 1], [0.9, 0.2, 0.2, 1]
@@ -149,7 +153,7 @@ def add_ball(
         condim=6,
         friction=list(BALL_FRICTION),
     )
-    body.add_site(name=name, size=[0.005, 0, 0], group=base_model.VISUAL_GROUP_SITES)
+    body.add_site(name=name, size=[0.005, 0, 0], group=VISUAL_GROUP_SITES)
     return spec
 
 
@@ -202,7 +206,7 @@ def add_grasp_site(
         name=arm_prefix(arm) + "grasp",
         pos=list(np.asarray(ee.pos) + offset),
         size=[0.005, 0, 0],
-        group=base_model.VISUAL_GROUP_SITES,
+        group=VISUAL_GROUP_SITES,
     )
     return spec
 

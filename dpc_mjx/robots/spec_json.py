@@ -4,13 +4,13 @@ its fields tagged with `"type"`. Reading builds only these dataclasses, never ar
 from __future__ import annotations
 
 import dataclasses
-import json
 import pathlib
 from typing import Any
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.arm_file import SUFFIXES
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
+from dpc_mjx.robots.arms.file import SUFFIXES
+from dpc_mjx.robots.urdf import read_description
 from dpc_mjx.robots.variants import VARIANTS, RobotSpec, resolve
 
 ArmLike = str | ArmSpec | UrdfArm | RobotSpec
@@ -102,15 +102,7 @@ def read_arm_description(path: str | pathlib.Path) -> UrdfArm:
     p = pathlib.Path(path).expanduser()
     if not p.is_file():
         raise DpcError(f"Arm description {str(path)!r} does not exist; give the path of its JSON.")
-    try:
-        d = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DpcError(f"Arm description {p} is not valid JSON ({e}); fix the file.") from e
-    if not isinstance(d, dict) or "urdf" not in d or set(d) - set(DESCRIPTION_KEYS):
-        raise DpcError(
-            f'Arm description {p}: expected a JSON object with "urdf" (the arm file) and any '
-            f"of {list(DESCRIPTION_KEYS[1:])}; got keys {sorted(d) if isinstance(d, dict) else d}."
-        )
+    d = read_description(p, "Arm description", DESCRIPTION_KEYS, "the arm file")
     try:
         mount = d.get("mount", {})
         home = d.get("home", {})

@@ -1,5 +1,8 @@
-"""Load one of the URDFs shipped with dpc_mjx (`dpc_mjx.assets`, copies of the example-robot-data
-wheel's) into an `mujoco.MjSpec`, without its meshes.
+"""What base files and arm files share (`robots.bases` and `robots.arms` both read through here):
+one of the URDFs shipped with dpc_mjx (`dpc_mjx.assets`, copies of the example-robot-data wheel's)
+loaded into an `mujoco.MjSpec` without its meshes, the geom and site groups of what is only drawn,
+the mesh formats and URDF joint kinds MuJoCo reads, a joint's range narrowed for a home pose, and
+the JSON file that names a robot file and what to read of it (`read_description`).
 
 The visual meshes are COLLADA (.dae), which MuJoCo cannot read, and mesh collision shapes are
 costly in MJX (and not shipped). We therefore drop every <visual> element and every mesh collision
@@ -10,14 +13,20 @@ URDF unchanged.
 
 from __future__ import annotations
 
+import json
 import pathlib
 import xml.etree.ElementTree as ET
 
 import mujoco
 
 from dpc_mjx import assets
+from dpc_mjx.errors import DpcError
 
 VISUAL_GROUP = 1  # geom group of the visual-only primitives
+VISUAL_GROUP_SITES = 4  # sites are hidden by default in the viewer
+MESH_FORMATS = (".stl", ".obj", ".msh")  # the mesh files MuJoCo reads
+URDF_MOVABLE = ("revolute", "continuous", "prismatic")
+HOME_MARGIN = 0.05  # rad (m): an inferred home pose stays this far inside the joint range
 
 
 def load_urdf(name: str | pathlib.Path, *, drop_links: tuple[str, ...] = ()) -> mujoco.MjSpec:
@@ -65,3 +74,27 @@ def make_visual(geom: mujoco.MjsGeom) -> None:
     geom.group = VISUAL_GROUP
     geom.density = 0.0
     geom.mass = 0.0
+
+
+def inside(rng: tuple[float, float]) -> tuple[float, float]:
+    """The joint range `rng` narrowed by `HOME_MARGIN` at each end (to half its width at most)."""
+    lo, hi = rng
+    margin = min(HOME_MARGIN, (hi - lo) / 2)
+    return lo + margin, hi - margin
+
+
+def read_description(p: pathlib.Path, what: str, keys: tuple[str, ...], first: str) -> dict:
+    """A JSON file describing a robot file (a base's, an arm's): an object with the key `keys[0]`
+    (its file) and any of the others; `DpcError` naming `what` and `first` (what the first key
+    holds) otherwise."""
+    try:
+        d = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DpcError(f"{what} {p} is not valid JSON ({e}); fix the file.") from e
+    if not isinstance(d, dict) or keys[0] not in d or set(d) - set(keys):
+        got = f"keys {sorted(d)}" if isinstance(d, dict) else repr(d)
+        raise DpcError(
+            f'{what} {p}: expected a JSON object with "{keys[0]}" ({first}) and any of '
+            f"{list(keys[1:])}; got {got}."
+        )
+    return d

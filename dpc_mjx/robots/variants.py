@@ -12,9 +12,9 @@ import dataclasses
 import math
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import a1
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
-from dpc_mjx.robots.base_file import BaseSpec
+from dpc_mjx.robots.arms.mount import REFERENCE_TRUNK_HALF_EXTENTS
+from dpc_mjx.robots.bases.file import BaseSpec
 
 MAX_ARMS = 2
 MIN_MOUNT_SEPARATION = 0.08  # m between two arm bases (their plates are 0.04 m in radius)
@@ -25,7 +25,7 @@ Arm = ArmSpec | UrdfArm
 @dataclasses.dataclass(frozen=True)
 class RobotSpec:
     """A base and the arms mounted on it (structure: changing it means a new compile). `base`:
-    a named base, the path of its file, or a `BaseSpec` (`robots.base_model.as_base`)."""
+    a named base, the path of its file, or a `BaseSpec` (`robots.bases.model.as_base`)."""
 
     name: str
     arms: tuple[Arm, ...] = ()
@@ -60,7 +60,7 @@ class RobotSpec:
         return sum(arm.mass for arm in self.arms if isinstance(arm, ArmSpec))
 
 
-_TOP = a1.TRUNK_HALF_EXTENTS[2]  # m, top face of the trunk
+_TOP = REFERENCE_TRUNK_HALF_EXTENTS[2]  # m, top face of the trunk
 
 VARIANTS: dict[str, RobotSpec] = {
     spec.name: spec

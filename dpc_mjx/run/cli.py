@@ -41,7 +41,7 @@ from dpc_mjx.run.cli_tools import (
     BASE_HELP,
     CONTROLLER_NAMES,
     TASK_HELP,
-    add_env_options,
+    add_episode_options,
     env_options,
     given,
     parse_sets,
@@ -218,17 +218,11 @@ def _training_commands(sub) -> None:
 
     p = sub.add_parser("transfer", help="train a new arm's encoder against a frozen decoder")
     p.add_argument("--export", required=True, help="an export folder (run/export)")
-    p.add_argument(
-        "--arm",
-        required=True,
-        help="the new arm: a variant (so100), your arm's .urdf or MJCF .xml file, or a .json arm "
-        "description (docs/own-arm.md)",
-    )
+    arm = "the new arm: a variant (so100), your arm's .urdf or MJCF .xml file, or a .json arm "
+    p.add_argument("--arm", required=True, help=arm + "description (docs/own-arm.md)")
     p.add_argument("--samples", type=int, default=30_000)
-    p.add_argument("--task", help=TASK_HELP)
-    p.add_argument("--seed", type=int, default=0)
     env = "env options over the export's, e.g. engine=native (collect in MuJoCo C)"
-    add_env_options(p, env)
+    add_episode_options(p, seed=0, env_help=env)
     p.set_defaults(handler=_transfer)
 
 
@@ -288,11 +282,9 @@ def _evaluation_commands(sub) -> None:
     p.add_argument("--upper-arm", default="0.10:0.30:8", help="upper-arm length, m, low:high:count")
     p.add_argument("--gripper-mass", default="0.1:0.6:8", help="gripper masses, kg, low:high:count")
     p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
-    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--episodes", type=int, default=16, help="per grid point")
     p.add_argument("--steps", type=int, help="env steps per episode (default: the task's)")
-    p.add_argument("--seed", type=int, default=1000)
-    add_env_options(p)
+    add_episode_options(p, seed=1000)
     p.add_argument("--out", default="runs/sweep", help="folder for the CSVs and heatmaps")
     p.set_defaults(handler=_sweep)
 
@@ -303,7 +295,6 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
     arms = "arms: encoder names, variants, arm files or descriptions (default: the policy's arm)"
     p.add_argument("--arms", nargs="+", help=arms)
     p.add_argument("--controllers", nargs="+", default=_CONTROLLERS, help=_CONTROLLERS_HELP)
-    p.add_argument("--task", help=TASK_HELP)
     episodes = "per controller (default: 64 on a CPU, 1024 on a GPU: --device of eval)"
     p.add_argument("--episodes", type=int, help=episodes)
     p.add_argument(
@@ -312,10 +303,9 @@ def _eval_options(p: argparse.ArgumentParser) -> None:
         help="env steps of 20 ms per episode (default: the task's episode length; "
         "reaching 1000 = 20 s, pushing 500, carrying 650, lifting 1000)",
     )
-    p.add_argument("--seed", type=int, default=1000)
     p.add_argument("--out", help="also write the table to this markdown file")
     env = "env options over the export's, e.g. sensor_noise=0 sensor_delay=0 (exact sensors)"
-    add_env_options(p, env)
+    add_episode_options(p, seed=1000, env_help=env)
     csv = (
         "one row per episode (default: beside --out, else runs/eval/[native-]<task>-seed<seed>.csv)"
     )

@@ -40,6 +40,21 @@ def add_env_options(p: argparse.ArgumentParser, help_text: str | None = None) ->
     p.add_argument("--base", help=BASE_HELP)
 
 
+def add_episode_options(
+    p: argparse.ArgumentParser,
+    *,
+    seed: int | None,
+    seed_help: str | None = None,
+    env_help: str | None = None,
+) -> None:
+    """What an episode is drawn from: `--task`, `--seed` (default `seed`; None: no such option)
+    and the env options (`add_env_options`)."""
+    p.add_argument("--task", help=TASK_HELP)
+    if seed is not None:
+        p.add_argument("--seed", type=int, default=seed, help=seed_help)
+    add_env_options(p, env_help)
+
+
 def env_options(args: argparse.Namespace) -> dict:
     """The env options of `--env` and `--base` (the same as `--env base=...`)."""
     options = parse_sets(args.env)
@@ -111,8 +126,8 @@ def _mjcf(args: argparse.Namespace) -> None:
 
 
 def _base(args: argparse.Namespace) -> None:
-    from dpc_mjx.robots.base_describe import describe, description  # noqa: PLC0415 (handler)
-    from dpc_mjx.robots.base_file import read_base  # noqa: PLC0415 (subcommand handler)
+    from dpc_mjx.robots.bases.describe import describe, description  # noqa: PLC0415 (handler)
+    from dpc_mjx.robots.bases.file import read_base  # noqa: PLC0415 (subcommand handler)
     from dpc_mjx.serialization import write_json  # noqa: PLC0415 (subcommand handler)
 
     with warnings.catch_warnings():  # a fusion's warning: describe prints it among the facts
@@ -146,13 +161,11 @@ def tool_commands(sub) -> None:
 
     p = sub.add_parser("render", help="a video (MP4 or GIF) of an episode, headless")
     p.add_argument("--out", required=True, help="clip.mp4 or clip.gif")
-    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--arm", default="regular", help="a variant, an arm file or description")
     p.add_argument("--controller", default=Controller.MBC.value, help=f"one of {CONTROLLER_NAMES}")
     p.add_argument("--compare", nargs="+", help="several controllers side by side, same episode")
     p.add_argument("--export", help="for dpc and the env options (default: the shipped export)")
     p.add_argument("--seconds", type=float, default=2.0)
-    p.add_argument("--seed", type=int, default=0, help="as dpc-mjx eval --seed")
     p.add_argument("--episode", type=int, default=0, help="episode index within the seed")
     p.add_argument(
         "--episodes",
@@ -163,17 +176,16 @@ def tool_commands(sub) -> None:
     p.add_argument("--width", type=int, default=480)
     p.add_argument("--height", type=int, default=360)
     env = "env options over the export's (engine=native: MuJoCo C)"
-    add_env_options(p, env)
+    add_episode_options(p, seed=0, seed_help="as dpc-mjx eval --seed", env_help=env)
     p.set_defaults(handler=_render)
 
     p = sub.add_parser("view", help="MuJoCo's viewer: a controller live, pushed with the mouse")
     p.add_argument("--controller", default=Controller.DPC.value, help=f"one of {CONTROLLER_NAMES}")
     p.add_argument("--arm", help="a variant, an arm file or description (default: the export's)")
-    p.add_argument("--task", help=TASK_HELP)
     p.add_argument("--export", help="for dpc and the env options (default: the shipped export)")
     p.add_argument("--seconds", type=float, help="stop after this simulated time (default: never)")
     env = "env options over the export's (push_force=[0,30]: random pushes too; engine=mjx)"
-    add_env_options(p, env)
+    add_episode_options(p, seed=None, env_help=env)
     p.set_defaults(handler=_view)
 
     p = sub.add_parser("variants", help="build every arm variant and stand a batch of each")

@@ -22,7 +22,7 @@ from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.config import check_number_or_pair
 from dpc_mjx.envs.registry import DEFAULT_TASK, get_config
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.family import ArmFamily
+from dpc_mjx.robots.arms.family import ArmFamily
 from dpc_mjx.robots.variants import resolve
 from dpc_mjx.serialization import jsonable, read_json, tuples, write_json
 from dpc_mjx.writer import barrier, is_writer
@@ -122,7 +122,7 @@ class RunConfig:
     task: str = DEFAULT_TASK
     arm: str = "regular"  # a variant name (`dpc_mjx.robots.VARIANTS`)
     # Arms drawn around `arm` whose data join the adapter's and the regression's
-    # (`robots.family`; count 0: the run's arm alone, the paper's protocol)
+    # (`robots.arms.family`; count 0: the run's arm alone, the paper's protocol)
     arm_family: ArmFamily = ArmFamily()
     env_overrides: dict = dataclasses.field(default_factory=dict)  # EnvConfig fields
     samples: int = 100_000  # random-motion transitions for the adapter

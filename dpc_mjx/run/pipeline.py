@@ -288,7 +288,7 @@ def export(
             "sac_env_steps": result.history[-1]["env_steps"] if result.history else 0,
             "actor_init": config.actor_init,
             "policy_input": config.policy_input,
-            # the arms the adapter and the policy learnt from besides `arms` (robots.family)
+            # the arms the adapter and the policy learnt from besides `arms` (robots.arms.family)
             **({"arm_family": config.arm_family} if config.arm_family.count else {}),
             **({"residual_slow_s": config.residual_slow_s} if config.splits_residual else {}),
         },

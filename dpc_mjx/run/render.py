@@ -29,7 +29,7 @@ from dpc_mjx.errors import DpcError
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.robots import layout
 from dpc_mjx.robots.arms import EE_SITE
-from dpc_mjx.robots.assemble import arm_prefix
+from dpc_mjx.robots.arms.mount import arm_prefix
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.rotations import roll_pitch_yaw

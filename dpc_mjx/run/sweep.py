@@ -5,8 +5,8 @@
 
 The arm is the export's (the arm of its first encoder, a parametric `ArmSpec`: `regular` for
 the shipped export); its upper-arm length (m) and gripper mass (kg) take every value of the grid
-(`robots.params.batch_arm_params`), so the whole grid is one batched `mjx.Model` and one program:
-one compile for every controller (`envs.model_batch.ModelBatchEnv` in an
+(`robots.arms.params.batch_arm_params`), so the whole grid is one batched `mjx.Model` and one
+program: one compile for every controller (`envs.model_batch.ModelBatchEnv` in an
 `envs.controller_batch.ControllerBatch`, MJX engine). DPC uses the export's
 encoder of that arm at every grid point: the sweep asks how far one encoder carries.
 
@@ -33,7 +33,7 @@ from dpc_mjx.envs.rollout import run_episodes
 from dpc_mjx.errors import DpcError
 from dpc_mjx.io.shipped import SHIPPED, export_cells
 from dpc_mjx.physics import AUTO
-from dpc_mjx.robots.params import batch_arm_params
+from dpc_mjx.robots.arms.params import batch_arm_params
 from dpc_mjx.robots.variants import arm_name
 from dpc_mjx.run.eval import CONTROLLERS, CellResult, cell_result
 from dpc_mjx.run.plots import sweep_heatmaps

@@ -1,5 +1,5 @@
 """The arms a run's adapter and oracle regression learn from: the run's arm and, with
-`RunConfig.arm_family`, the family of arms drawn around it (`robots.family`).
+`RunConfig.arm_family`, the family of arms drawn around it (`robots.arms.family`).
 
 With a family of K - 1 arms, `collect_training_data` collects `samples / K` MBC samples on each
 of the K arms from `ceil(data_envs / K)` envs, so that the data budget and each env's trajectory
@@ -17,7 +17,7 @@ import math
 from dpc_mjx import adapter as adapter_lib
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.registry import make
-from dpc_mjx.robots.family import describe
+from dpc_mjx.robots.arms.family import describe
 from dpc_mjx.robots.variants import Arm, resolve
 from dpc_mjx.run.config import RunConfig
 

@@ -41,7 +41,7 @@ from dpc_mjx.envs.tasks import scripts
 from dpc_mjx.envs.tasks.carrying import FINGER_CLOSED
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import objects
-from dpc_mjx.robots.assemble import arm_prefix
+from dpc_mjx.robots.arms.mount import arm_prefix
 from dpc_mjx.robots.variants import Arm, RobotSpec, resolve
 
 BALL_MASS = 0.3  # kg, the paper's ball

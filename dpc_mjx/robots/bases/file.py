@@ -1,4 +1,4 @@
-"""A quadruped base read from its URDF or MJCF file as a `BaseSpec` (`robots.base_model` builds
+"""A quadruped base read from its URDF or MJCF file as a `BaseSpec` (`robots.bases.model` builds
 it).
 
 `read_base(base)`: `base` is a named base (`NAMED_BASES`: a1, go1, go2, b1, and b1-z1, the B1
@@ -6,8 +6,8 @@ carrying a Z1 whose arm `arm_urdf` splits off; their URDFs ship in `dpc_mjx/desc
 path of a .urdf or an MJCF .xml file, or of a .json file naming that file and what inference
 cannot decide (`{"file": "my_dog.urdf", "legs": {"FR": "<hip joint>", ...}, "home_height": 0.3,
 "foot_radius": 0.02}`, paths relative to the JSON). An MJCF is read as a URDF is, its bodies the
-links (`robots.base_mjcf` says how: its free joint's body or its one top-level body is the root,
-its torque limits are its motors' or joints' force ranges). What is inferred:
+links (`robots.bases.mjcf_tree` says how: its free joint's body or its one top-level body is the
+root, its torque limits are its motors' or joints' force ranges). What is inferred:
 
 - the trunk: the URDF's root link, skipping massless links (< MASSLESS kg) welded on top by a
   fixed joint (Go1's and B1's `base`); it gets the free joint;
@@ -22,15 +22,15 @@ its torque limits are its motors' or joints' force ranges). What is inferred:
 - masses and the trunk's inertia: the URDF's <inertial>s as MuJoCo reads them (an inertia that
   breaks the triangle inequality, as ANYmal's camera links do, balanced by MuJoCo; a fixed link's
   that MuJoCo refuses, ANYmal C's `hatch`, fused into the link it hangs from with a warning,
-  `robots.urdf_fuse`); the trunk's are the rigid trunk's: its link and the links welded to it,
+  `robots.bases.fuse`); the trunk's are the rigid trunk's: its link and the links welded to it,
   an arm's base not counted;
 - the trunk's box: around its collision primitives, or, where it has only collision meshes (Go2),
   around their vertices (STL, OBJ or MSH files; the named bases' in `descriptions/meshes/<name>/`);
-- the home pose: each foot under its hip (`robots.base_measure.solve_home`; sideways where it
+- the home pose: each foot under its hip (`robots.bases.measure.solve_home`; sideways where it
   hangs at the zero pose: under the thigh joint on Unitree's legs, outboard of it by the shank's
   offset on ANYmal C's and Solo 12's) with the trunk's origin `home_height` above the floor, by
   default HOME_FRACTION of the leg's length plus the feet's radius (the A1: 0.625 x 0.4 m +
-  0.02 m = 0.27 m, `robots.a1.HOME_HEIGHT`).
+  0.02 m = 0.27 m, `robots.bases.a1.HOME_HEIGHT`).
 """
 
 from __future__ import annotations
@@ -46,19 +46,19 @@ import numpy as np
 
 from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import base_home
-from dpc_mjx.robots.arm_file import inside
-from dpc_mjx.robots.base_measure import check_efforts, solve_home, trunk_numbers
-from dpc_mjx.robots.base_mjcf import is_mjcf, read_tree
-from dpc_mjx.robots.base_urdf import MASSLESS, UrdfTree, read_json, subtree_urdf
-from dpc_mjx.robots.urdf_fuse import Fused, describe_fused
+from dpc_mjx.robots.bases import geometry
+from dpc_mjx.robots.bases.fuse import Fused, describe_fused
+from dpc_mjx.robots.bases.measure import check_efforts, solve_home, trunk_numbers
+from dpc_mjx.robots.bases.mjcf_tree import is_mjcf, read_tree
+from dpc_mjx.robots.bases.urdf_tree import MASSLESS, UrdfTree, read_json, subtree_urdf
+from dpc_mjx.robots.urdf import inside
 
 # Name -> (file in dpc_mjx/descriptions/, the path it was copied from under the wheel's robots/):
 # `assets.URDFS`' quadrupeds (b1-z1: the B1 carrying a Z1, its `others`).
 NAMED_BASES = {name: assets.URDFS[name] for name in ("a1", "go1", "go2", "b1", "b1-z1")}
 MESHES = assets.DESCRIPTIONS / "meshes"  # meshes/<name>/: the collision meshes a named base reads
 
-LEGS = ("FR", "FL", "RR", "RL")  # front-right, front-left, rear-right, rear-left (robots.a1's)
+LEGS = ("FR", "FL", "RR", "RL")  # front-right, front-left, rear-right, rear-left (the A1's)
 LEG_DOF = 3  # joints per leg: hip (ab/adduction), thigh, knee
 PLACE_MARGIN = 0.01  # m: a foot's x and y at the zero pose lie at least this far off the midplanes
 HOME_FRACTION = 0.625  # home: the hip this fraction of the leg's length above the foot's centre
@@ -116,7 +116,7 @@ class BaseSpec:
     home_height: float  # m: the trunk's origin above the floor at home
     home_from: str  # how home_height was chosen
     others: tuple[Limb, ...] = ()  # actuated subtrees that are not legs
-    fused: tuple[Fused, ...] = ()  # fixed links whose inertia MuJoCo refuses, fused (urdf_fuse)
+    fused: tuple[Fused, ...] = ()  # fixed links whose inertia MuJoCo refuses, fused (bases.fuse)
 
     @property
     def leg_joints(self) -> tuple[str, ...]:
@@ -249,8 +249,8 @@ def _read_cached(p, _mtime, name, mesh_dir, height, leg_names, radius) -> BaseSp
             _check_leg(tree, chain)
         others = [c for c in chains if c not in placed.values()]
     feet = {place: _foot(tree, model, data, chain, radius) for place, chain in placed.items()}
-    anchors = {place: base_home.joint_anchors(model, data, c) for place, c in placed.items()}
-    lengths = {place: base_home.leg_length(anchors[place], feet[place][3]) for place in LEGS}
+    anchors = {place: geometry.joint_anchors(model, data, c) for place, c in placed.items()}
+    lengths = {place: geometry.leg_length(anchors[place], feet[place][3]) for place in LEGS}
     if height is None:
         height = HOME_FRACTION * float(np.mean(list(lengths.values())))
         height += max(foot[2] for foot in feet.values())
@@ -263,7 +263,7 @@ def _read_cached(p, _mtime, name, mesh_dir, height, leg_names, radius) -> BaseSp
         hip = anchors[place][1]
         target = np.array([hip[0], zero[1], r - height])  # m: under the hip (module doc)
         home, error = solve_home(model, data, chain, (model.body(foot).id, center), target)
-        if error > base_home.HOME_TOL:
+        if error > geometry.HOME_TOL:
             raise DpcError(
                 f"Base {p}: leg {place} cannot put its foot on the floor under its hip with the "
                 f"trunk {height:.3f} m high (it stays {error:.3f} m off; the leg is "
@@ -354,8 +354,8 @@ def _foot(tree, model, data, chain, radius) -> tuple:
         center, r, source = np.zeros(3), None, f"{FOOT_FRACTION} x the leg's length (no sphere)"
     world = data.xpos[body] + data.xmat[body].reshape(3, 3) @ center
     if r is None:
-        anchors = base_home.joint_anchors(model, data, chain)
-        r = FOOT_FRACTION * base_home.leg_length(anchors, world)
+        anchors = geometry.joint_anchors(model, data, chain)
+        r = FOOT_FRACTION * geometry.leg_length(anchors, world)
     if radius is not None:
         r, source = float(radius), "given"
     return model.body(body).name, center.copy(), r, world, source

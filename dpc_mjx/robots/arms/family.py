@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.arms import ArmSpec
+from dpc_mjx.robots.arms.parametric import ArmSpec
 
 LINK_MASSES = ("base_mass", "turret_mass", "upper_arm_mass", "forearm_mass", "wrist_mass")
 RANGES = ("upper_arm_length", "forearm_length", "link_mass_scale", "gripper_mass")

@@ -1,6 +1,6 @@
 """A user's own arm from a URDF or MJCF file: checked before anything is compiled, read as a spec.
 
-What the library needs of the file: one tree of links (bodies) whose root we weld to the A1's
+What the library needs of the file: one tree of links (bodies) whose root we weld to the base's
 trunk, at least one movable joint (URDF revolute, continuous or prismatic; MJCF hinge or slide), a
 mass and an inertia on every link that moves, and the mesh files its geometry names. What it
 infers (the end effector and home pose only when not told: `UrdfArm.ee_body`, `.home`):
@@ -16,7 +16,7 @@ MSH) are kept; others (COLLADA .dae, ...) are dropped with a warning naming them
 <collision> shapes are kept only where it has no <visual>. Every geom becomes visual only (no mass,
 no contacts): like the library's other arms, the arm never collides, and its inertia comes from the
 file (MJCF bodies without an <inertial> get the inertia MuJoCo computes from their geoms).
-The file's XML is prepared for MuJoCo by `dpc_mjx.robots.arm_xml`.
+The file's XML is prepared for MuJoCo by `dpc_mjx.robots.arms.prepare`.
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.arm_xml import MESH_FORMATS, URDF_MOVABLE, prepare_mjcf, prepare_urdf
+from dpc_mjx.robots.arms.prepare import prepare_mjcf, prepare_urdf
+from dpc_mjx.robots.urdf import MESH_FORMATS, inside
 
 SUFFIXES = {".urdf": "urdf", ".xml": "mjcf"}
-HOME_MARGIN = 0.05  # rad (m): an inferred home pose stays this far inside the joint range
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,13 +154,6 @@ def default_home(arm_file: ArmFile) -> dict[str, float]:
     return home
 
 
-def inside(rng: tuple[float, float]) -> tuple[float, float]:
-    """The joint range `rng` narrowed by `HOME_MARGIN` at each end (to half its width at most)."""
-    lo, hi = rng
-    margin = min(HOME_MARGIN, (hi - lo) / 2)
-    return lo + margin, hi - margin
-
-
 # ---------------------------------------------------------------------------------------------
 # Both formats, on the compiled arm alone
 
@@ -227,15 +220,4 @@ def _make_inertia_explicit(spec: mujoco.MjSpec, model: mujoco.MjModel) -> None:
         body.fullinertia = [math.nan] * 6  # the principal inertia above replaces it
 
 
-__all__ = [  # MESH_FORMATS and URDF_MOVABLE are `robots.arm_xml`'s, imported from here before
-    "HOME_MARGIN",
-    "MESH_FORMATS",
-    "SUFFIXES",
-    "URDF_MOVABLE",
-    "ArmFile",
-    "check_home",
-    "check_path",
-    "default_home",
-    "inside",
-    "read",
-]
+__all__ = ["SUFFIXES", "ArmFile", "check_home", "check_path", "default_home", "read"]

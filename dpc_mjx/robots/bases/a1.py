@@ -1,7 +1,7 @@
 """The Unitree A1, the default base: its names and numbers.
 
 It is built from its URDF (example-robot-data's, shipped in `dpc_mjx/descriptions/`) like every
-base, by `robots.base_model` from `robots.base_file.read_base("a1")`; what is here is what the
+base, by `robots.bases.model` from `robots.bases.file.read_base("a1")`; what is here is what the
 library's A1 has always been, kept as the reference the other bases are scaled from
 (`control.base_scaling`) and for the tests that check the A1 is read as it was built by hand.
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from dpc_mjx.robots.base_file import LEGS, read_base
-from dpc_mjx.robots.base_model import A1_HOME_HEIGHT, A1_HOME_LEG, IMU_SITE, base_mjspec
+from dpc_mjx.robots.bases.file import LEGS, read_base
+from dpc_mjx.robots.bases.model import A1_HOME_HEIGHT, A1_HOME_LEG, IMU_SITE, base_mjspec
 
 LEG_JOINTS = tuple(f"{leg}_{part}_joint" for leg in LEGS for part in ("hip", "thigh", "calf"))
 FOOT_SITES = tuple(f"{leg}_foot" for leg in LEGS)

@@ -1,5 +1,5 @@
-"""A base's URDF (`dpc_mjx.robots.base_file` reads it): its tree of links and joints, checked
-(`LinkTree`: the walks, shared with an MJCF's bodies, `robots.base_mjcf`); the XML MuJoCo
+"""A base's URDF (`dpc_mjx.robots.bases.file` reads it): its tree of links and joints, checked
+(`LinkTree`: the walks, shared with an MJCF's bodies, `robots.bases.mjcf_tree`); the XML MuJoCo
 compiles of it (the base alone, the trunk welded at the world origin, so that world coordinates
 are trunk-frame coordinates); a subtree of it (an arm it carries) as a URDF of its own; the
 base's JSON file.
@@ -8,24 +8,22 @@ base's JSON file.
 from __future__ import annotations
 
 import copy
-import json
 import pathlib
 import xml.etree.ElementTree as ET
 
 import mujoco
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.arm_xml import MESH_FORMATS, URDF_MOVABLE
-from dpc_mjx.robots.urdf import strip_meshes
-from dpc_mjx.robots.urdf_fuse import Fused, apply_to_urdf, fuse_plan
+from dpc_mjx.robots.bases.fuse import Fused, apply_to_urdf, fuse_plan
+from dpc_mjx.robots.urdf import MESH_FORMATS, URDF_MOVABLE, read_description, strip_meshes
 
 MASSLESS = 1e-4  # kg: a root link lighter than this is a placeholder (Go1's base: 1e-6 kg)
 
 
 class LinkTree:
-    """Links joined into one tree by joints, walked as `base_file` walks a base: `joints[name]`
+    """Links joined into one tree by joints, walked as `bases.file` walks a base: `joints[name]`
     holds its type ("fixed" or movable), parent and child link; `root_name` is the root link.
-    A URDF's (`UrdfTree`) or an MJCF's bodies (`base_mjcf.MjcfTree`)."""
+    A URDF's (`UrdfTree`) or an MJCF's bodies (`bases.mjcf_tree.MjcfTree`)."""
 
     path: pathlib.Path
     joints: dict[str, dict]
@@ -45,7 +43,7 @@ class LinkTree:
         raise NotImplementedError
 
     def fused(self, trunk: str, skipped: tuple[str, ...]) -> tuple[Fused, ...]:
-        """The links `compile` fuses into the link they hang from (`robots.urdf_fuse`)."""
+        """The links `compile` fuses into the link they hang from (`robots.bases.fuse`)."""
         return ()
 
     def out(self, link: str) -> list[str]:
@@ -174,7 +172,7 @@ class UrdfTree(LinkTree):
         return compile_base(self, trunk, skipped, mesh_dir)
 
     def fused(self, trunk: str, skipped: tuple[str, ...]) -> tuple[Fused, ...]:
-        """Its fixed links whose inertia MuJoCo refuses, fused (`urdf_fuse.fuse_plan`)."""
+        """Its fixed links whose inertia MuJoCo refuses, fused (`bases.fuse.fuse_plan`)."""
         return fuse_plan(self, trunk, skipped)
 
 
@@ -222,17 +220,10 @@ def compile_base(tree: UrdfTree, trunk: str, skipped: tuple[str, ...], mesh_dir)
 
 
 def read_json(p: pathlib.Path, keys: tuple[str, ...]) -> dict:
-    """A base's JSON file (`base_file.read_base`): an object of `keys`, "file" a .urdf or an
+    """A base's JSON file (`bases.file.read_base`): an object of `keys`, "file" a .urdf or an
     MJCF .xml."""
-    try:
-        options = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DpcError(f"Base JSON {p} is not valid JSON ({e}); fix the file.") from e
-    if not isinstance(options, dict) or "file" not in options or set(options) - set(keys):
-        raise DpcError(
-            f"Base JSON {p}: an object with the keys {keys} ('file' required: the .urdf or "
-            f".xml, relative to the JSON), got {options!r}."
-        )
+    first = "the .urdf or .xml, relative to the JSON"
+    options = read_description(p, "Base JSON", keys, first)
     if pathlib.Path(str(options["file"])).suffix.lower() not in (".urdf", ".xml"):
         raise DpcError(
             f"Base JSON {p}: 'file' must name a .urdf or an MJCF .xml file, got "

@@ -1,9 +1,9 @@
-"""A quadruped base (`robots.base_file.BaseSpec`) as a MuJoCo spec, and the names the library gives
+"""A quadruped base (`robots.bases.file.BaseSpec`) as a MuJoCo spec, and the names the library gives
 its parts on every base.
 
 `base_mjspec(base)`: the base's URDF (meshes dropped, as `robots.urdf` does for every shipped
 file) or MJCF (its own actuators, sensors, sites, keyframes and options dropped too:
-`robots.base_mjcf.load_mjcf`), its trunk given the free joint `ROOT_JOINT`, an IMU site on the
+`robots.bases.mjcf_tree.load_mjcf`), its trunk given the free joint `ROOT_JOINT`, an IMU site on the
 trunk's origin, a foot site and a foot sphere per leg (the file's sphere, or one of the spec's
 radius where the file has none), a torque motor per leg joint (range: the file's effort),
 IMU-like sensors, and contacts only between the feet and the floor (the MJX-friendly "feet only"
@@ -11,7 +11,7 @@ layout). An actuated subtree of the file that is not a leg (`base.others`: B1's 
 it is mounted as an arm.
 
 Whatever the file calls them, the library's names are the same on every base: actuators
-`<place>_<part>` (`FR_hip`, ..., `RL_calf`; places `base_file.LEGS`, parts `LEG_PARTS`), foot sites
+`<place>_<part>` (`FR_hip`, ..., `RL_calf`; places `bases.file.LEGS`, parts `LEG_PARTS`), foot sites
 and spheres `<place>_foot`, the trunk is the body of the `ROOT_JOINT`. `robots.layout` finds
 everything by these names; the A1's own file names agree with them, so its model is unchanged.
 
@@ -28,16 +28,15 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.base_file import LEGS, BaseSpec, base_file_path, read_base
-from dpc_mjx.robots.base_mjcf import is_mjcf, load_mjcf
-from dpc_mjx.robots.base_urdf import UrdfTree
-from dpc_mjx.robots.urdf import load_urdf, make_visual
-from dpc_mjx.robots.urdf_fuse import apply_to_spec
+from dpc_mjx.robots.bases.file import LEGS, BaseSpec, base_file_path, read_base
+from dpc_mjx.robots.bases.fuse import apply_to_spec
+from dpc_mjx.robots.bases.mjcf_tree import is_mjcf, load_mjcf
+from dpc_mjx.robots.bases.urdf_tree import UrdfTree
+from dpc_mjx.robots.urdf import VISUAL_GROUP_SITES, load_urdf, make_visual
 
 ROOT_JOINT = "root"  # the trunk's free joint
 IMU_SITE = "imu"
 LEG_PARTS = ("hip", "thigh", "calf")  # a leg's joints from the trunk out (actuator names)
-VISUAL_GROUP_SITES = 4  # sites are hidden by default in the viewer
 
 FOOT_FRICTION = 0.8
 A1_EFFORT = 33.5  # N·m, the A1's joint torque limit, at which the two values below hold
@@ -152,7 +151,6 @@ __all__ = [
     "IMU_SITE",
     "LEG_PARTS",
     "ROOT_JOINT",
-    "VISUAL_GROUP_SITES",
     "actuator_name",
     "as_base",
     "base_mjspec",

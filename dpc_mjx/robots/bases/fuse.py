@@ -1,5 +1,5 @@
 """A base URDF's fixed links whose inertia MuJoCo refuses, fused into the link they hang from
-(`base_file.read_base` reads a base through this; `BaseSpec.fused` records what was done).
+(`bases.file.read_base` reads a base through this; `BaseSpec.fused` records what was done).
 
 MuJoCo reads a URDF <inertia> as a full matrix and refuses one whose smallest eigenvalue is below
 `MJ_EPS` (zero excepted: an all-zero inertia is a frame's), also on a link no joint moves: a
@@ -116,7 +116,7 @@ def combine(parent: Inertial, child: Inertial, rot: np.ndarray, pos: np.ndarray)
 
 
 def fuse_plan(tree, trunk: str, skipped: tuple[str, ...]) -> tuple[Fused, ...]:
-    """The fusions the base `tree` (a `base_urdf.UrdfTree`, trunk `trunk`, links `skipped`
+    """The fusions the base `tree` (a `bases.urdf_tree.UrdfTree`, trunk `trunk`, links `skipped`
     dropped) needs (module doc); () where MuJoCo reads every link's inertia as it is."""
     into_joint = {j["child"]: name for name, j in tree.joints.items()}
     order = [n for n in tree.subtree_links(trunk) if n not in skipped]  # parents first

@@ -1,12 +1,12 @@
-"""What `dpc_mjx.robots.base_file.read_base` inferred of a quadruped base, for the user to check
+"""What `dpc_mjx.robots.bases.file.read_base` inferred of a quadruped base, for the user to check
 and correct (issue 27; `dpc-mjx base FILE [--out my_dog.json]`).
 
 `describe(spec)`: the `BaseSpec` as readable text: the trunk, the masses, each leg (place, joints,
 torque limits, foot and its radius, length, home angles), the trunk's box, the home height and
 any other actuated subtree (an arm the file carries), each with where it came from; a warning
-for each set of fixed links fused because MuJoCo refuses an inertia among them (`urdf_fuse`).
+for each set of fixed links fused because MuJoCo refuses an inertia among them (`bases.fuse`).
 
-`description(spec, json_path)`: the base's JSON file (`base_file`'s module doc) that, written at
+`description(spec, json_path)`: the base's JSON file (`bases.file`'s module doc) that, written at
 `json_path`, makes `read_base(json_path)` give the same legs, home height and foot radius; edit
 its "legs", "home_height" or "foot_radius" to correct what inference got wrong.
 """
@@ -16,8 +16,8 @@ from __future__ import annotations
 import os
 import pathlib
 
-from dpc_mjx.robots.base_file import LEGS, BaseSpec
-from dpc_mjx.robots.urdf_fuse import describe_fused
+from dpc_mjx.robots.bases.file import LEGS, BaseSpec
+from dpc_mjx.robots.bases.fuse import describe_fused
 
 _DIGITS = 4  # decimals printed: 0.1 mm, 0.1 g, 1e-4 rad
 _SAME_RADIUS = 1e-12  # m: feet whose radii differ by less are given one radius in the JSON
@@ -64,7 +64,8 @@ def describe(spec: BaseSpec) -> str:
         lines += [
             f"other actuated subtree at {limb.root}: joints {', '.join(limb.joints)}",
             f"    mass {_num(limb.mass)} kg, mounted at {_vec(limb.mount_pos)} m, turned by "
-            f"{_vec(limb.mount_quat)} (w, x, y, z); split it off with base_file.arm_urdf",
+            f"{_vec(limb.mount_quat)} (w, x, y, z); split it off with "
+            "dpc_mjx.robots.bases.file.arm_urdf",
         ]
     if _one_radius(spec) is None:
         lines.append("note: the feet's radii differ, so the JSON leaves foot_radius out")

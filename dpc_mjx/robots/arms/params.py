@@ -24,8 +24,8 @@ import numpy as np
 from mujoco import mjx
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.arms import rod_inertia
-from dpc_mjx.robots.assemble import arm_prefix
+from dpc_mjx.robots.arms.mount import arm_prefix
+from dpc_mjx.robots.arms.parametric import rod_inertia
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,7 +1,7 @@
-"""A quadruped base's MJCF file (.xml), read by `robots.base_file.read_base` as it reads a URDF
-and built by `robots.base_model.base_mjspec` as it builds one.
+"""A quadruped base's MJCF file (.xml), read by `robots.bases.file.read_base` as it reads a URDF
+and built by `robots.bases.model.base_mjspec` as it builds one.
 
-`MjcfTree.parse(path)`: the file's bodies as a `base_urdf.LinkTree`: a body is a link, its one
+`MjcfTree.parse(path)`: the file's bodies as a `bases.urdf_tree.LinkTree`: a body is a link, its one
 hinge or slide joint the joint from its parent body, a body without a joint welded to its parent;
 the one top-level body is the root (a free joint on it, if any, is dropped: the library gives the
 trunk its own); every body and joint is named (the library finds them by name). What a URDF's
@@ -30,7 +30,7 @@ import xml.etree.ElementTree as ET
 import mujoco
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.base_urdf import LinkTree, UrdfTree
+from dpc_mjx.robots.bases.urdf_tree import LinkTree, UrdfTree
 from dpc_mjx.robots.urdf import make_visual
 
 MJCF_SUFFIX = ".xml"
@@ -197,7 +197,7 @@ class MjcfTree(LinkTree):
 def load_mjcf(path: pathlib.Path, trunk: str, skipped: tuple[str, ...], others) -> mujoco.MjSpec:
     """The base's MJCF as a spec for `base_model.base_mjspec` (module doc): the colliding
     primitives as massless visuals (`robots.urdf.make_visual`), no meshes, the `others` (the
-    `base_file.Limb`s: an arm the file carries) left out, static bodies fused on compile."""
+    `bases.file.Limb`s: an arm the file carries) left out, static bodies fused on compile."""
     tree = MjcfTree.parse(path)
     drop = []
     for limb in others:  # the limb's root, or where that is the trunk its first moving body

@@ -1,6 +1,6 @@
 """`UrdfArm`: an arm from a file, the SO-100 and Unitree Z1 (the example-robot-data wheel's URDFs,
 shipped in `dpc_mjx/descriptions/`; structurally different, used to test transfer) or a user's own
-URDF or MJCF file (`dpc_mjx.robots.arm_file` reads and checks it), and its spec with the mount's
+URDF or MJCF file (`dpc_mjx.robots.arms.file` reads and checks it), and its spec with the mount's
 sensors, the end-effector site and servos capped in gain (`urdf_arm_spec`).
 """
 
@@ -15,25 +15,16 @@ import numpy as np
 
 from dpc_mjx import assets
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import arm_file
-from dpc_mjx.robots.base_model import VISUAL_GROUP_SITES
-from dpc_mjx.robots.mount import (
-    ARM_ARMATURE,
-    ARM_DAMPING,
-    EE_SITE,
-    Mount,
-    Servo,
-    add_mount_sensors,
-    add_servo,
-)
-from dpc_mjx.robots.urdf import VISUAL_GROUP, make_visual
+from dpc_mjx.robots.arms import file as arm_file
+from dpc_mjx.robots.arms import mount as arm_mount
+from dpc_mjx.robots.urdf import VISUAL_GROUP, VISUAL_GROUP_SITES, inside, make_visual
 
 
 @dataclasses.dataclass(frozen=True)
 class UrdfArm:
     """An arm from a file, attached at `mount`: a name the library knows ('so100', 'z1', shipped
     copies of the example-robot-data wheel's URDFs) or the path of your own URDF or MJCF file
-    (`dpc_mjx.robots.arm_file` says what the file needs and what is inferred).
+    (`dpc_mjx.robots.arms.file` says what the file needs and what is inferred).
 
     ee_body and ee_offset (m, in ee_body's frame): where the end effector is; home: (joint, value)
     pairs of the home pose (rad, m for a slide), joints not named at 0 (clipped into their range).
@@ -42,7 +33,7 @@ class UrdfArm:
     """
 
     urdf: str  # a name of URDF_ARMS, or the path of a .urdf or MJCF .xml file
-    mount: Mount = Mount()
+    mount: arm_mount.Mount = arm_mount.Mount()
     ee_body: str | None = None
     ee_offset: tuple[float, float, float] | None = None
     home: tuple[tuple[str, float], ...] = ()
@@ -74,7 +65,7 @@ class UrdfArm:
         home = arm_file.default_home(read)
         if not self.is_file:
             for name, q in URDF_ARMS[self.urdf].home.items():
-                home[name] = float(np.clip(q, *arm_file.inside(read.joints[name])))
+                home[name] = float(np.clip(q, *inside(read.joints[name])))
         return {**home, **dict(self.home)}
 
     @property
@@ -127,9 +118,9 @@ def urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
     spec.modelname = arm.name
     root = spec.body(read.root)
     root.fuse = 0  # keep the root body apart from the trunk: the mount sensors live in it
-    add_mount_sensors(spec, root)
+    arm_mount.add_mount_sensors(spec, root)
     spec.body(read.ee_body).add_site(
-        name=EE_SITE, pos=list(arm.offset), size=[0.01, 0, 0], group=VISUAL_GROUP_SITES
+        name=arm_mount.EE_SITE, pos=list(arm.offset), size=[0.01, 0, 0], group=VISUAL_GROUP_SITES
     )
     if not arm.is_file or not read.has_geometry:
         # Capsules between successive joint origins, so the arm is visible without its meshes.
@@ -143,11 +134,11 @@ def urdf_arm_spec(arm: UrdfArm) -> mujoco.MjSpec:
                     fromto=[0, 0, 0, *body.pos],
                 )
     for joint in spec.joints:
-        joint.armature = ARM_ARMATURE
-        joint.damping = [max(joint.damping[0], ARM_DAMPING), 0, 0]
+        joint.armature = arm_mount.ARM_ARMATURE
+        joint.damping = [max(joint.damping[0], arm_mount.ARM_DAMPING), 0, 0]
         effort = float(joint.actfrcrange[1]) or _URDF_KP_CAP
         kp = min(effort, _URDF_KP_CAP)
-        add_servo(spec, joint.name, Servo(kp=kp, kv=0.05 * kp, force=effort))
+        arm_mount.add_servo(spec, joint.name, arm_mount.Servo(kp=kp, kv=0.05 * kp, force=effort))
     for geom in spec.geoms:
         make_visual(geom)
         geom.group = VISUAL_GROUP

@@ -1,4 +1,4 @@
-"""Geometry of a base read from its file (`dpc_mjx.robots.base_file`), on a MuJoCo model of the
+"""Geometry of a base read from its file (`dpc_mjx.robots.bases.file`), on a MuJoCo model of the
 base alone whose trunk is welded at the world origin, so that world coordinates are trunk-frame
 coordinates (m): the trunk's box and inertia, a leg's length and the home pose of a leg.
 

@@ -1,17 +1,17 @@
-"""Arms that mount on the A1 trunk.
+"""The paper's parametric arm (`ArmSpec`) and the one builder of every arm's spec (`arm_spec`).
 
 `ArmSpec` is a WidowX-like parametric arm built from primitives: waist (yaw), shoulder, elbow and
 wrist (pitch) hinges plus a one-finger parallel gripper (built here). `UrdfArm` is an arm from a
 file: the SO-100 and Unitree Z1 (the example-robot-data wheel's URDFs, shipped in
 `dpc_mjx/descriptions/`; structurally different, used to test transfer) or a user's own URDF or
-MJCF file (`dpc_mjx.robots.urdf_arm`, read by `dpc_mjx.robots.arm_file`; another of the optional
-wheel's: `dpc_mjx.assets.wheel_urdf`).
+MJCF file (`dpc_mjx.robots.arms.urdf_arm`, read by `dpc_mjx.robots.arms.file`; another of the
+optional wheel's: `dpc_mjx.assets.wheel_urdf`).
 
 Every arm is built as its own `MjSpec` whose root body (the arm's base, fixed to the trunk) holds a
-site `mount` with a force and a torque sensor (`dpc_mjx.robots.mount`), and is attached to the
+site `mount` with a force and a torque sensor (`dpc_mjx.robots.arms.mount`), and is attached to the
 trunk with a name prefix `arm<i>/`. MuJoCo's force/torque sensors read the wrench the *trunk
 exerts on the arm* at that site, in the site frame; `dpc_mjx.robots.layout` turns this into the
-wrench the arm puts on the trunk. The names of `mount` and `urdf_arm` stay importable from here.
+wrench the arm puts on the trunk.
 """
 
 from __future__ import annotations
@@ -23,21 +23,17 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.base_model import VISUAL_GROUP_SITES
-from dpc_mjx.robots.mount import (
+from dpc_mjx.robots.arms.mount import (
     ARM_ARMATURE,
     ARM_DAMPING,
     EE_SITE,
-    FORCE_SENSOR,
-    MOUNT_SITE,
-    TORQUE_SENSOR,
     Mount,
     Servo,
     add_mount_sensors,
     add_servo,
 )
-from dpc_mjx.robots.urdf import make_visual
-from dpc_mjx.robots.urdf_arm import URDF_ARMS, UrdfArm, urdf_arm_spec
+from dpc_mjx.robots.arms.urdf_arm import UrdfArm, urdf_arm_spec
+from dpc_mjx.robots.urdf import VISUAL_GROUP_SITES, make_visual
 
 # Fixed geometry of the parametric arm (m).
 BASE_HEIGHT = 0.03  # mount plate to waist joint
@@ -290,21 +286,11 @@ def _add_plate(gripper: mujoco.MjsBody, mass: float, rgba: list) -> None:
     )
 
 
-__all__ = [  # with the names of `robots.mount` and `robots.urdf_arm` imported from here before
-    "ARM_ARMATURE",
-    "ARM_DAMPING",
+__all__ = [
     "EE_SHAPES",
-    "EE_SITE",
-    "FORCE_SENSOR",
-    "MOUNT_SITE",
-    "TORQUE_SENSOR",
-    "URDF_ARMS",
     "WIDOWX_RANGES",
     "WIDOWX_SERVOS",
     "ArmSpec",
-    "Mount",
-    "Servo",
-    "UrdfArm",
     "arm_spec",
     "box_inertia",
     "home_qpos",

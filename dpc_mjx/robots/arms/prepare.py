@@ -12,10 +12,8 @@ import pathlib
 import xml.etree.ElementTree as ET
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots.urdf import strip_meshes
+from dpc_mjx.robots.urdf import MESH_FORMATS, URDF_MOVABLE, strip_meshes
 
-MESH_FORMATS = (".stl", ".obj", ".msh")  # the mesh files MuJoCo reads
-URDF_MOVABLE = ("revolute", "continuous", "prismatic")
 _FIX_MESH = "put the file there, correct the path, or remove the element that names it"
 
 
@@ -235,4 +233,4 @@ def _find_package(p: pathlib.Path, package: str) -> pathlib.Path:
     )
 
 
-__all__ = ["MESH_FORMATS", "URDF_MOVABLE", "prepare_mjcf", "prepare_urdf"]
+__all__ = ["prepare_mjcf", "prepare_urdf"]

@@ -1,4 +1,4 @@
-"""What `base_file.read_base` measures on a base compiled alone with its trunk welded at the origin
+"""What `bases.file.read_base` measures on a base compiled alone with its trunk welded at the origin
 (`LinkTree.compile`; world coordinates are trunk-frame ones): the rigid trunk's numbers and a leg's
 home pose; and the check that its leg joints' efforts are motors' limits, not placeholders."""
 
@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.errors import DpcError
-from dpc_mjx.robots import base_home
-from dpc_mjx.robots.arm_file import inside
+from dpc_mjx.robots.bases import geometry
+from dpc_mjx.robots.urdf import inside
 
 KNEE_START = 0.5  # rad: a straight leg's home is solved again from its knee bent this much
 
@@ -25,7 +25,7 @@ def trunk_numbers(tree, model, data, trunk, limbs) -> tuple:
     b = model.body(trunk).id
     limb_links = {w for limb in limbs if limb.root != trunk for w in tree.welded(limb.root)}
     rigid = [model.body(w).id for w in tree.welded(trunk) if w not in limb_links]
-    mass, com, inertia = base_home.rigid_inertia(model, data, rigid)
+    mass, com, inertia = geometry.rigid_inertia(model, data, rigid)
     geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == b]
     primitives = [g for g in geoms if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH]
     if not geoms:
@@ -33,7 +33,7 @@ def trunk_numbers(tree, model, data, trunk, limbs) -> tuple:
             f"Base {tree.path}: the trunk link {trunk!r} has no collision shape, so its box (where "
             "arms are mounted) is unknown; give it a <collision> <box> or a mesh (MJCF: <geom>)."
         )
-    box = base_home.geom_box(model, data, primitives or geoms)
+    box = geometry.geom_box(model, data, primitives or geoms)
     return (
         float(model.body_subtreemass[b]), mass, _t(com), tuple(_t(row) for row in inertia),
         _t(box.mean(axis=0)), _t((box[1] - box[0]) / 2),
@@ -42,19 +42,19 @@ def trunk_numbers(tree, model, data, trunk, limbs) -> tuple:
 
 
 def solve_home(model, data, chain, foot, target) -> tuple[np.ndarray, float]:
-    """`base_home.solve_leg` from the zero pose, and where that leaves the foot off (a leg
+    """`geometry.solve_leg` from the zero pose, and where that leaves the foot off (a leg
     straight at the zero pose, Solo 12's: no joint moves its foot along the leg), from the knee
     bent KNEE_START rad one way, then the other (clipped into its range)."""
     qadr = [model.jnt_qposadr[model.joint(name).id] for name in chain]
     start = data.qpos[qadr].copy()
-    home, error = base_home.solve_leg(model, data, chain, foot, target)
+    home, error = geometry.solve_leg(model, data, chain, foot, target)
     for bend in (-KNEE_START, KNEE_START):
-        if error <= base_home.HOME_TOL:
+        if error <= geometry.HOME_TOL:
             break
         knee = model.joint(chain[-1]).id
         lo, hi = inside(model.jnt_range[knee]) if model.jnt_limited[knee] else (-np.inf, np.inf)
         data.qpos[qadr] = [*start[:-1], np.clip(start[-1] + bend, lo, hi)]
-        home, error = base_home.solve_leg(model, data, chain, foot, target)
+        home, error = geometry.solve_leg(model, data, chain, foot, target)
     return home, error
 
 
