@@ -83,11 +83,20 @@ def test_mjx_imported_after_dpc_mjx_prints_nothing():
     assert _fresh_python(code, "") == "mujoco.mjx\n"
 
 
+# The one exception, and why: jax has no public hook around its reads of the persistent cache,
+# where jaxlib logs its false "SIGILL" lines; `compile_cache.quiet_reads` wraps that reader when
+# the CLI turns the cache on, and changes nothing where a jax has none (docs/decisions-engines.md,
+# "The compilation cache's reads").
+_PRIVATE_READERS = {"compile_cache.py"}
+
+
 def test_no_module_reads_a_private_jax_module_or_jaxlibs_files():
     private = re.compile(r"jax\._src|from jax import _src|find_spec\(\"jaxlib\"\)|\bmmap\b")
-    offenders = [
+    readers = {
         p.relative_to(PACKAGE).as_posix()
         for p in PACKAGE.rglob("*.py")
         if private.search(p.read_text())
-    ]
+    }
+    offenders = sorted(readers - _PRIVATE_READERS)
     assert not offenders, f"modules that read jax's private modules or jaxlib's files: {offenders}"
+    assert readers == _PRIVATE_READERS, f"the exception is stale: {sorted(readers)}"
