@@ -1,5 +1,6 @@
 # dpc_mjx: every target installs the project into .venv first if needed, with the exact versions
-# of constraints.txt; `make test-latest` tests the newest releases pyproject.toml allows instead.
+# of constraints.txt; `make test-latest` tests the newest releases pyproject.toml allows instead,
+# `make test-mujoco3` the pins with MuJoCo 3.17.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -8,12 +9,27 @@ BENCH_STAMP := $(VENV)/.installed-bench
 DOCS_STAMP := $(VENV)/.installed-docs
 LATEST := .venv-latest
 EXTRAS := test,render,urdf,onnx
+# The other MuJoCo the whole suite runs on (`make test-mujoco3`): the pins of constraints.txt with
+# this mujoco in place of the pinned one (mujoco-mjx 3.17.0 either way), in its own venv.
+MUJOCO3 := 3.17.0
+MUJOCO3_VENV := .venv-mujoco3
 
-.PHONY: install render-deps demo test test-all test-latest bench mjcf docs lint clean
+.PHONY: install render-deps demo test test-all test-latest test-mujoco3 bench mjcf docs lint clean
+
+# MuJoCo 4 is three wheels (mujoco-core, mujoco-studio, mujoco), and pip upgrading a MuJoCo 3 in
+# place deletes the new core's files (`import mujoco`: "core bindings ('mujoco-core') are
+# missing"): so a MuJoCo 3 in venv $(1) (mujoco without mujoco-core) is uninstalled first.
+define drop_mujoco3
+	if $(1)/bin/python -m pip show -q mujoco 2>/dev/null && \
+	  ! $(1)/bin/python -m pip show -q mujoco-core 2>/dev/null; then \
+	  echo "$(1): uninstalling MuJoCo 3 before MuJoCo 4 (docs/commands.md, \"Install\")"; \
+	  $(1)/bin/python -m pip uninstall -q -y mujoco; fi
+endef
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
+	$(call drop_mujoco3,$(VENV))
 	$(BIN)/python -m pip install -q -c constraints.txt -e ".[$(EXTRAS)]"
 	touch $(STAMP)
 
@@ -62,10 +78,26 @@ LATEST_VERSIONS := jax jaxlib flax optax mujoco mujoco-mjx brax
 test-latest: render-deps
 	test -x $(LATEST)/bin/python || $(PYTHON) -m venv $(LATEST)
 	$(LATEST)/bin/python -m pip install -q --upgrade pip
+	$(call drop_mujoco3,$(LATEST))
 	$(LATEST)/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e ".[$(EXTRAS)]"
 	@$(LATEST)/bin/python -c "import sys; from importlib.metadata import version; \
 	  print('latest:', ', '.join(p + ' ' + version(p) for p in sys.argv[1:]))" $(LATEST_VERSIONS)
 	DPC_JAX_CACHE=$(CURDIR)/.cache/jax-latest $(LATEST)/bin/python -m pytest $(PYTEST_ARGS)
+
+# The same tests on MuJoCo $(MUJOCO3), in a venv of its own made fresh (MuJoCo 3 and 4 do not
+# replace each other cleanly in place), with the compilation cache of `make test` (the jax is
+# the same; a program is keyed by its HLO, so a model that compiles differently is a new entry).
+$(MUJOCO3_VENV)/.installed-test: pyproject.toml constraints.txt
+	rm -rf $(MUJOCO3_VENV) && $(PYTHON) -m venv $(MUJOCO3_VENV)
+	sed 's/^mujoco==.*/mujoco==$(MUJOCO3)/' constraints.txt > $(MUJOCO3_VENV)/constraints.txt
+	$(MUJOCO3_VENV)/bin/python -m pip install -q --upgrade pip
+	$(MUJOCO3_VENV)/bin/python -m pip install -q -c $(MUJOCO3_VENV)/constraints.txt -e ".[$(EXTRAS)]"
+	touch $@
+
+test-mujoco3: $(MUJOCO3_VENV)/.installed-test render-deps
+	@$(MUJOCO3_VENV)/bin/python -c "from importlib.metadata import version as v; \
+	  print('mujoco', v('mujoco'), '+ mujoco-mjx', v('mujoco-mjx'))"
+	$(MUJOCO3_VENV)/bin/python -m pytest $(PYTEST_ARGS)
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python experiments/bench_physics.py
@@ -97,4 +129,4 @@ lint: $(STAMP)
 	$(BIN)/lint-imports --no-logo --cache-dir .cache/import-linter
 
 clean:
-	rm -rf $(VENV) $(LATEST) .cache
+	rm -rf $(VENV) $(LATEST) $(MUJOCO3_VENV) .cache

@@ -185,3 +185,5 @@ def test_mjcf_scene_loads_to_the_built_model(name):
         )
     assert from_file.opt.timestep == built.opt.timestep
     assert math.isclose(from_file.body_mass.sum(), built.body_mass.sum(), abs_tol=1e-5)
+    # the headlight on in both, not MuJoCo 4's "auto" (2), which lets a renderer turn it off
+    assert from_file.vis.headlight.active == built.vis.headlight.active == 1

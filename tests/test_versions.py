@@ -1,6 +1,8 @@
 """The declared version ranges (pyproject.toml), the pinned set (constraints.txt) and what is
 installed agree with each other (docs/decisions.md, "Packaging and versions")."""
 
+import re
+import sys
 import tomllib
 from importlib.metadata import version
 from pathlib import Path
@@ -9,6 +11,8 @@ import pytest
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 from packaging.version import Version
+
+from dpc_mjx.run import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -23,6 +27,18 @@ _NEEDED_TOGETHER = (
     ),
 )  # fmt: skip
 PYTHONS = ("3.11", "3.12", "3.13", "3.14")  # requires-python >= 3.11
+# Releases inside a range's bounds that it excludes: (package, release, why), read from their
+# changelogs.
+_EXCLUDED = (
+    (
+        "mujoco", "4.0.0",
+        "its sparse Cholesky factorisation (new in 4.0.0) merged rows with different descendants "
+        "into one supernode, giving the Newton solver a wrong Hessian factor: wrong accelerations "
+        "and divergence when the constraint Jacobian is sparse (fixed in 4.0.1, MuJoCo issue 3767)",
+    ),
+)  # fmt: skip
+# The MuJoCo that `make test-mujoco3` puts in place of the pinned one (Makefile, MUJOCO3)
+_MAKEFILE_MUJOCO = re.compile(r"^MUJOCO3 := (\S+)$", re.MULTILINE)
 
 
 def _applies(requirement: Requirement, python: str | None) -> bool:
@@ -89,8 +105,52 @@ def test_installed_core_dependency_lies_in_the_declared_range(name):
     )
 
 
-def test_mujoco_and_mjx_are_the_same_release():
-    assert version("mujoco") == version("mujoco-mjx")
+def test_mjx_is_3_17_beside_a_mujoco_no_older():
+    """mujoco-mjx has no 4.x: its 3.17 (which asks for mujoco >= 3.17.0.dev0) runs on MuJoCo 3.17
+    and on 4.0.1 (the suite on both: `make test`, `make test-mujoco3`)."""
+    mjx, mj = Version(version("mujoco-mjx")), Version(version("mujoco"))
+    assert mjx.release[:2] == (3, 17), f"mujoco-mjx {mjx}: the tested releases are 3.17.*"
+    assert mj >= mjx, f"mujoco {mj} is older than mujoco-mjx {mjx}, which needs mujoco >= 3.17"
+
+
+@pytest.mark.parametrize("python", PYTHONS)
+def test_the_ranges_exclude_the_releases_known_broken(python):
+    core, _ = _declared(python)
+    for name, release, why in _EXCLUDED:
+        assert not core[name].specifier.contains(release, prereleases=True), (
+            f"{core[name]} admits {name} {release}: {why}"
+        )
+
+
+def test_the_makefiles_other_mujoco_lies_in_the_range():
+    (other,) = _MAKEFILE_MUJOCO.findall((ROOT / "Makefile").read_text())
+    assert _declared()[0]["mujoco"].specifier.contains(other), f"Makefile's MUJOCO3 {other}"
+    assert other != _pins()["mujoco"], "make test-mujoco3 would test the pinned MuJoCo again"
+
+
+class _HalfInstalledMujoco:
+    """A finder whose `import mujoco` fails as MuJoCo 4's does after `pip install -U` over 3.x."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name == "mujoco":
+            raise ImportError(
+                "The 'mujoco' package is installed, but its core bindings ('mujoco-core') are "
+                "missing or corrupted (for example, after uninstalling a previous monolithic "
+                "'mujoco' package). Repair your environment with:\n  pip install "
+                "--force-reinstall --no-deps mujoco mujoco-core mujoco-studio"
+            )
+
+
+def test_cli_names_the_repair_of_a_half_installed_mujoco_in_one_line(monkeypatch, capsys):
+    monkeypatch.delitem(sys.modules, "mujoco", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [_HalfInstalledMujoco(), *sys.meta_path])
+    assert cli.main(["variants"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("dpc-mjx: error: MuJoCo ") and "half-installed" in line, line
+    assert line.endswith(
+        f"pip uninstall -y mujoco mujoco-core mujoco-studio && pip install "
+        f"mujoco=={version('mujoco')}"
+    ), line
 
 
 @pytest.mark.parametrize("python", PYTHONS)

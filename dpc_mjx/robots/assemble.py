@@ -94,6 +94,7 @@ _SCENE_TEXTURES = {
 
 def add_scene(spec: mujoco.MjSpec) -> mujoco.MjSpec:
     """Add the floor, light, sky and a tracking camera to `spec` (in place) and return it."""
+    spec.visual.headlight.active = 1  # on, also where MuJoCo 4's "auto" (its default) turns it off
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     spec.visual.global_.azimuth = 120
     spec.visual.global_.elevation = -20

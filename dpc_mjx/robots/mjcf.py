@@ -40,6 +40,9 @@ def scene_xml(name: str) -> str:
     for child in parts:
         if child.tag in _SCENE_PARTS:
             root.append(child)
+    # The headlight on (add_scene), as MuJoCo 3 and 4 both read it: MuJoCo 3.17 writes nothing (on
+    # is its default) and reads only integers, MuJoCo 4 writes "true" (its default is "auto").
+    root.find("visual/headlight").set("active", "1")
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="unicode") + "\n"
 

@@ -48,8 +48,8 @@ from dpc_mjx.run.cli_tools import (
     tool_commands,
 )
 
-_CONTROLLERS = [c.value for c in Controller]  # mbc observer dpc oracle, `dpc_mjx.controllers`
-_CONTROLLERS_HELP = f"any of {CONTROLLER_NAMES} (default: all four)"
+_CONTROLLERS = [c.value for c in Controller]  # every one, `dpc_mjx.controllers`
+_CONTROLLERS_HELP = f"any of {CONTROLLER_NAMES} (default: all)"
 
 
 def _run_config(args: argparse.Namespace):
@@ -320,9 +320,30 @@ def _join_processes(args: argparse.Namespace) -> None:
     initialize(args.coordinator, args.num_processes, args.process_id)
 
 
+def _check_mujoco() -> None:
+    """MuJoCo imports, else a DpcError with the repair: `pip install -U` of MuJoCo 4 (three wheels:
+    mujoco-core, mujoco-studio, mujoco) over a 3.x install deletes the new core's files, and
+    `import mujoco` says its core bindings ('mujoco-core') are missing (docs/commands.md,
+    "Install, and the upgrade from MuJoCo 3")."""
+    try:
+        import mujoco  # noqa: F401, PLC0415 (the check itself, before any subcommand)
+    except ImportError as e:
+        if "mujoco-core" not in str(e):
+            raise
+        from importlib.metadata import version  # noqa: PLC0415 (only on this error)
+
+        mj = version("mujoco")
+        raise DpcError(
+            f"MuJoCo {mj} is half-installed (pip upgraded a MuJoCo 3 in place, which deletes the "
+            "files of mujoco-core); reinstall it: pip uninstall -y mujoco mujoco-core "
+            f"mujoco-studio && pip install mujoco=={mj}"
+        ) from None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
+        _check_mujoco()
         compile_cache.enable()  # programs compiled once (dpc_mjx/compile_cache.py)
         _join_processes(args)
         args.handler(args)
