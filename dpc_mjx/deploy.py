@@ -66,7 +66,13 @@ from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import arm_name
 
 # the oracle needs a force sensor no robot has
-CONTROLLERS = (Controller.DPC, Controller.MBC, Controller.OBSERVER)
+CONTROLLERS = (
+    Controller.DPC,
+    Controller.MBC,
+    Controller.OBSERVER,
+    Controller.FEEDFORWARD,
+    Controller.FEEDFORWARD_OBSERVER,
+)
 # mjx.Data fields MuJoCo C computes from the measured attitude and joints (trunk origin at 0)
 KINEMATICS = ("xpos", "xmat", "xipos", "site_xpos", "site_xmat", "subtree_com", "cdof")
 
@@ -209,7 +215,11 @@ class Deployment:
 
     def _data_at_origin(self, x: dict) -> mjx.Data:
         kin = {k: x[k] for k in KINEMATICS}
-        return self._template.replace(qpos=x["qpos"], qvel=x["qvel"], ctrl=x["ctrl"], **kin)
+        adr = self.env.lay.sensor_adr["accelerometer"]  # read by the arms' model wrench
+        sensors = self._template.sensordata.at[adr : adr + 3].set(x["accel"])
+        return self._template.replace(
+            qpos=x["qpos"], qvel=x["qvel"], ctrl=x["ctrl"], sensordata=sensors, **kin
+        )
 
     @staticmethod
     def _moved(d: mjx.Data, p: jax.Array, v: jax.Array) -> mjx.Data:
@@ -256,8 +266,10 @@ class Deployment:
         if policy_step:  # the policy acts at its rate, as in `DpcEnv.step`
             obs = observation(env.lay, d, x["command"], ls.ctrl.observer.estimate)
             u_policy = env.policy_u(self.policy(obs[None], jax.random.PRNGKey(0))[0])
-        u, add = env.controller_u(d, u_policy)
-        cs, ctrl = ctl.step(ls.ctrl, d, x["command"], u, x["arm_targets"], add_estimate=add)
+        u, add, model = env.controller_u(d, u_policy)
+        cs, ctrl = ctl.step(
+            ls.ctrl, d, x["command"], u, x["arm_targets"], add_estimate=add, add_model=model
+        )
         new = LoopState(ctrl=cs, est=est, u_policy=u_policy, tick=ls.tick + 1)
         return new, ctrl[env.lay.leg_act]
 

@@ -90,7 +90,7 @@ def _inputs(env, state, actions):
         dist = env.sampler.advance(info["dist"], d.time, key)
         u_pol = env.policy_u(action)
         noise = sensors.draw(key, info["sensor_bias"], env.config.sensor_noise)
-        u, _ = env.controller_u(d, u_pol)  # (u, whether the estimate is added)
+        u, *_ = env.controller_u(d, u_pol)  # (u, whether the estimate, the model are added)
         targets = env.arm_targets(dist, d.time, d)
         return dist, u_pol, noise, targets, u
 

@@ -18,12 +18,36 @@ from dpc_mjx.run.eval import evaluate
 
 
 def test_members_are_the_strings_of_before_in_the_tables_order():
-    assert [c.value for c in Controller] == ["mbc", "observer", "dpc", "oracle"]
+    assert [c.value for c in Controller] == [
+        *("mbc", "observer", "feedforward", "feedforward_observer", "dpc", "oracle")
+    ]
     assert (
         Controller.DPC == "dpc" and "mbc" == Controller.MBC and f"{Controller.ORACLE}" == "oracle"
     )
     assert {"dpc": 1}[Controller.DPC] == 1  # a member finds a plain string's key
     assert EVAL_CONTROLLERS == ENV_CONTROLLERS == tuple(Controller) == RunConfig().eval_controllers
+
+
+def test_what_the_low_level_controller_adds_to_each_controllers_u():
+    """(the observer's estimate, the arms' model wrench): the classical controllers by name,
+    DPC by its u_base; the oracle and MBC nothing."""
+    adds = {c: c.adds() for c in Controller}
+    assert adds == {
+        Controller.MBC: (False, False),
+        Controller.OBSERVER: (True, False),
+        Controller.FEEDFORWARD: (False, True),
+        Controller.FEEDFORWARD_OBSERVER: (True, True),
+        Controller.DPC: (False, False),
+        Controller.ORACLE: (False, False),
+    }
+    bases = {b: Controller.DPC.adds(b) for b in ("zero", "observer", "gravity", "model")}
+    assert bases == {
+        "zero": (False, False),
+        "observer": (True, False),
+        "gravity": (False, False),
+        "model": (False, True),
+    }
+    assert Controller.MBC.adds("model") == (False, False)  # u_base is DPC's alone
 
 
 def test_parse_takes_members_strings_and_the_policy_alias():
@@ -41,7 +65,9 @@ def test_parse_takes_members_strings_and_the_policy_alias():
 @pytest.mark.parametrize("bad", ["pid", "DPC", "", None, 3])
 def test_parse_names_the_valid_controllers_otherwise(bad):
     with pytest.raises(
-        DpcError, match=r"Unknown controller .*\['mbc', 'observer', 'dpc', 'oracle'\]"
+        DpcError,
+        match=r"Unknown controller .*\['mbc', 'observer', 'feedforward', "
+        r"'feedforward_observer', 'dpc', 'oracle'\]",
     ):
         Controller.parse(bad)
 

@@ -99,8 +99,8 @@ def test_torques_equal_the_env_controller(deployment):
             obs = observation(env.lay, d, jp.asarray(COMMAND), cs.observer.estimate)
             new_u = env.policy_u(policy(obs[None], jax.random.PRNGKey(0))[0])
             u_policy = jp.where(tick % env.n_substeps == 0, new_u, u_policy)
-        u, add = env.controller_u(d, u_policy)
-        cs, ctrl = ctl.step(cs, d, jp.asarray(COMMAND), u, add_estimate=add)
+        u, add, model = env.controller_u(d, u_policy)
+        cs, ctrl = ctl.step(cs, d, jp.asarray(COMMAND), u, add_estimate=add, add_model=model)
         return cs, u_policy, ctrl[env.lay.leg_act]
 
     dep.reset(measure(dep, data), xy=data.qpos[:2])

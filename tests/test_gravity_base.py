@@ -67,8 +67,8 @@ def test_dpc_on_gravity_adds_the_arms_gravity_wrench_to_the_policys_u():
     env = dpc_mjx.make(DEFAULT_TASK, u_base="gravity", **kw)
     d = jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state
     u_policy = jp.array([1.0, -2.0, 3.0, 0.5, -0.5, 0.1])  # yaw frame, N and N·m
-    u, adds = env.controller_u(d, u_policy)
-    assert not adds  # nothing is added by the low-level controller
+    u, add_estimate, add_model = env.controller_u(d, u_policy)
+    assert not add_estimate and not add_model  # nothing is added by the low-level controller
     yaw = roll_pitch_yaw(d.qpos[None, 3:7])[0, 2]
     expected = wrench_to_world(u_policy, yaw) + env.arm_gravity(d)
     np.testing.assert_allclose(u, expected, atol=1e-5)

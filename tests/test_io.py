@@ -437,27 +437,34 @@ def test_a_policy_on_the_observer_adds_u_obs_in_numpy_as_the_env_does(trained, e
         dio.load(out)
 
 
-def test_a_policy_on_gravity_adds_the_given_gravity_wrench_in_numpy(trained, exported, tmp_path):
-    """u_base='gravity': the sidecar records the base; the numpy runner's u is the given arms'
-    gravity wrench (the policy's frame) plus the policy's u_scale * a, then turned by the
-    heading, as the env adds `DpcEnv.arm_gravity` (world) to the policy's u turned; without the
-    wrench it refuses, and a policy of another base refuses one."""
-    out = _regular_export(trained, tmp_path / "gravity", ENV_CONFIG.replace(u_base="gravity"))
-    assert json.loads((out / "dpc.json").read_text())["action_scaling"]["base"] == "gravity"
+@pytest.mark.parametrize("base", ["gravity", "model"])
+def test_a_policy_on_the_arms_wrench_adds_the_given_wrench_in_numpy(
+    trained, exported, tmp_path, base
+):
+    """u_base='gravity' (or 'model'): the sidecar records the base; the numpy runner's u is the
+    given arms' gravity (model) wrench, the policy's frame, plus the policy's u_scale * a, then
+    turned by the heading, as the env adds `DpcEnv.arm_gravity` (the controller the model
+    wrench: world) to the policy's u turned; without the wrench it refuses, and a policy of
+    another base refuses one."""
+    out = _regular_export(trained, tmp_path / base, ENV_CONFIG.replace(u_base=base))
+    assert json.loads((out / "dpc.json").read_text())["action_scaling"]["base"] == base
     obs = _obs(N_IN["regular"] + 6, seed=17)
     yaw = np.linspace(-3.0, 3.0, len(obs))
-    u_gravity = np.random.default_rng(3).normal(0.0, 5.0, (len(obs), 6))  # yaw frame
+    wrench = {f"u_{base}": np.random.default_rng(3).normal(0.0, 5.0, (len(obs), 6))}  # yaw frame
     policy, paper = NumpyPolicy(out, "regular"), NumpyPolicy(exported, "regular")
     residual = policy.residual(obs)
     np.testing.assert_allclose(residual, paper.u(obs), atol=1e-12)  # the same actor
-    expected = np.asarray(wrench_to_world(u_gravity + residual, yaw))
-    got = policy.u(obs, yaw, u_gravity=u_gravity)
+    expected = np.asarray(wrench_to_world(wrench[f"u_{base}"] + residual, yaw))
+    got = policy.u(obs, yaw, **wrench)
     np.testing.assert_allclose(got, expected, atol=_NUMPY_TOL * 50.0, rtol=0)
-    np.testing.assert_allclose(policy.u(obs, u_gravity=u_gravity), u_gravity + residual, atol=1e-12)
-    with pytest.raises(ValueError, match="pass u_gravity"):
+    np.testing.assert_allclose(policy.u(obs, **wrench), wrench[f"u_{base}"] + residual, atol=1e-12)
+    with pytest.raises(ValueError, match=f"pass u_{base}"):
         policy.u(obs, yaw)
     with pytest.raises(ValueError, match="base is 'zero'"):
-        paper.u(obs, u_gravity=u_gravity)
+        paper.u(obs, **wrench)
+    other = "model" if base == "gravity" else "gravity"
+    with pytest.raises(ValueError, match=f"base is '{base}'"):
+        policy.u(obs, **wrench, **{f"u_{other}": wrench[f"u_{base}"]})
 
 
 def test_numpy_policy_rejects_bad_input(exported, export_copy):

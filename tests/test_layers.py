@@ -90,8 +90,7 @@ def test_the_robots_contract_keeps_arms_and_bases_apart():
     nor the assembly, above the file reading they share; broken by an arm that imports a base."""
     robots = f"{PACKAGE}.robots"
     layers = [
-        grimp.Layer(*names, independent=ind)
-        for names, ind in map(_names, _contract_layers(robots))
+        grimp.Layer(*names, independent=ind) for names, ind in map(_names, _contract_layers(robots))
     ]
     assert layers[1].independent and set(layers[1].module_tails) == {"arms", "bases"}
     graph = grimp.build_graph(PACKAGE, cache_dir=None)

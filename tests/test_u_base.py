@@ -66,7 +66,8 @@ def test_only_dpc_adds_the_estimate_and_bad_bases_are_refused():
 
 
 def _random_wrenches(n: int = 32) -> Dataset:
-    """n rows of random u_oracle and u_gravity (world frame), u_obs (yaw frame) and headings."""
+    """n rows of random u_oracle, u_gravity and u_model (world frame), u_obs (yaw frame) and
+    headings."""
     rng = np.random.default_rng(0)
     yaw = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
     wrench = lambda: rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # noqa: E731 (N, N·m)
@@ -79,6 +80,7 @@ def _random_wrenches(n: int = 32) -> Dataset:
         u_obs=wrench(),
         yaw=yaw,
         u_gravity=wrench(),
+        u_model=wrench(),
     )
 
 
@@ -98,18 +100,22 @@ def test_the_residual_target_is_the_oracles_u_minus_the_estimate_in_either_frame
     assert np.any(np.abs(world - paper) > 0.01)  # the estimate made a difference
 
 
-def test_the_gravity_target_is_the_oracles_u_minus_the_arms_gravity_wrench():
+@pytest.mark.parametrize("base", ["gravity", "model"])
+def test_the_target_on_the_arms_wrench_is_the_oracles_u_minus_that_wrench(base):
+    """u_base 'gravity' (the arms' weight) or 'model' (their inverse dynamics): the actor is fitted
+    to what that wrench leaves of the oracle's u, in either frame; without its column, refused."""
     data = _random_wrenches()
+    wrench = getattr(data, f"u_{base}")
     scale = np.full(6, 40.0, np.float32)
-    world = regression_target(data, scale, "world", "gravity")
-    expected = np.clip((data.u_oracle - data.u_gravity) / scale, -U_CLIP, U_CLIP)
+    world = regression_target(data, scale, "world", base)
+    expected = np.clip((data.u_oracle - wrench) / scale, -U_CLIP, U_CLIP)
     np.testing.assert_allclose(world, expected, atol=_U_TOL)
-    yaw_frame = regression_target(data, scale, "yaw", "gravity")
-    expected = (data.u_oracle_in("yaw") - data.u_gravity_in("yaw")) / scale
+    yaw_frame = regression_target(data, scale, "yaw", base)
+    expected = (data.u_oracle_in("yaw") - getattr(data, f"u_{base}_in")("yaw")) / scale
     np.testing.assert_allclose(yaw_frame, np.clip(expected, -U_CLIP, U_CLIP), atol=_U_TOL)
-    without = dataclasses.replace(data, u_gravity=None)
-    with pytest.raises(DpcError, match="no u_gravity"):
-        regression_target(without, scale, "world", "gravity")
+    without = dataclasses.replace(data, **{f"u_{base}": None})
+    with pytest.raises(DpcError, match=f"no u_{base}"):
+        regression_target(without, scale, "world", base)
 
 
 def _trajectories() -> Dataset:

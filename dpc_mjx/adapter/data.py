@@ -49,6 +49,7 @@ _ROWS = (
     "u_obs",
     "yaw",
     "u_gravity",
+    "u_model",
 )
 
 
@@ -69,6 +70,9 @@ class Dataset:
     yaw: np.ndarray | None = None  # (N,) rad, the trunk's heading at t (world frame <-> yaw frame)
     # (N, 6) the arms' gravity wrench at t from their file's masses (`DpcEnv.arm_gravity`), world
     u_gravity: np.ndarray | None = None
+    # (N, 6) the arms' model wrench at t (their inverse dynamics from the measured states, the
+    # controller's last tick: `control/arm_estimate.py`), world
+    u_model: np.ndarray | None = None
     env_steps: int = 0  # env steps run to collect them (kept + dropped)
     seconds: float = 0.0  # wall time of the collection
 
@@ -102,6 +106,10 @@ class Dataset:
     def u_gravity_in(self, frame: str) -> np.ndarray:
         """(N, 6) the arms' gravity wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
         return self._world_wrench_in("u_gravity", frame)
+
+    def u_model_in(self, frame: str) -> np.ndarray:
+        """(N, 6) the arms' model wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
+        return self._world_wrench_in("u_model", frame)
 
     def _world_wrench_in(self, name: str, frame: str) -> np.ndarray:
         """(N, 6) the world-frame wrench column `name` in `frame` ('world' or 'yaw')."""
@@ -249,9 +257,11 @@ def collect(
     def record(before, after):  # the obs, its oracle u, heading and the next roll/pitch rates
         u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
         u_gravity = jax.vmap(env.unwrapped.arm_gravity)(before.pipeline_state)  # (B, 6) world
+        u_model = before.info["ctrl"].arm.wrench  # (B, 6) world, the last tick's
         yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
         keep = after.done == 0.0  # the next obs is a successor of obs
-        return before.obs, u_oracle, yaw, after.obs[:, layout.s_body][:, DRP], keep, u_gravity
+        drp = after.obs[:, layout.s_body][:, DRP]
+        return before.obs, u_oracle, yaw, drp, keep, u_gravity, u_model
 
     t0 = time.perf_counter()
     key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the policy
@@ -273,14 +283,16 @@ def collect(
             if i < burn_chunks:  # staggered starts: these rows are dropped
                 pbar.set_postfix_str(f"burn-in {(i + 1) * chunk}/{burn_chunks * chunk} steps")
                 continue
-            obs, u, yaw, drp, keep, grav = (x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out)
-            parts.append((obs[keep], drp[keep], ids[keep], u[keep], yaw[keep], grav[keep]))
+            obs, u, yaw, drp, keep, grav, model = (
+                x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out
+            )
+            parts.append(tuple(x[keep] for x in (obs, drp, ids, u, yaw, grav, model)))
             kept += int(keep.sum())
             pbar.update(min(int(keep.sum()), samples - pbar.n))
             if kept >= samples:
                 break
     columns = (np.concatenate([p[k] for p in parts])[:samples] for k in range(len(parts[0])))
-    obs, drp, env_id, u_oracle, yaw, u_gravity = columns  # float32 but env_id (int32)
+    obs, drp, env_id, u_oracle, yaw, u_gravity, u_model = columns  # float32 but env_id (int32)
     return Dataset(
         s_body=obs[:, layout.s_body],
         s_arm=obs[:, layout.s_arm],
@@ -291,6 +303,7 @@ def collect(
         u_obs=obs[:, layout.u_obs],
         yaw=yaw,
         u_gravity=u_gravity,
+        u_model=u_model,
         env_steps=steps,
         seconds=time.perf_counter() - t0,
     )

@@ -186,6 +186,17 @@ def _g_pattern() -> np.ndarray:
 G_PATTERN = _g_pattern()  # for qp.solve(..., g_pattern=G_PATTERN): 40 of G's 288 entries
 
 
+def desired_acceleration(params: BalanceParams, state: tuple, desired: tuple) -> jax.Array:
+    """(6,) qdd_d = Kp (q_d - q) + Kd (qd_d - qd) (eq. 9): the COM's acceleration (m/s^2) and
+    the trunk's angular acceleration (rad/s^2) the QP asks for, world frame. `state` and
+    `desired`: (COM position (3,) m, COM velocity (3,) m/s, trunk rotation (3, 3) body -> world,
+    angular velocity (3,) rad/s), as measured and as the plan asks."""
+    (com_pos, com_vel, rot, ang_vel), (pos_des, vel_des, rot_des, ang_vel_des) = state, desired
+    pose_err = jp.concatenate([pos_des - com_pos, rotvec_from_matrix(rot_des @ rot.T)])
+    vel_err = jp.concatenate([vel_des - com_vel, ang_vel_des - ang_vel])
+    return params.kp * pose_err + params.kd * vel_err
+
+
 def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts, disturbance)
     params: BalanceParams,
     com_pos: jax.Array,
@@ -228,9 +239,9 @@ def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts,
     ang = jp.concatenate([inertia_w_inv @ skew(r[i]) for i in range(N_FEET)], axis=1)  # (3, 12)
     M = jp.concatenate([lin, ang], axis=0) * jp.repeat(c, 3)[None, :]  # swing columns zeroed
 
-    pose_err = jp.concatenate([com_pos_des - com_pos, rotvec_from_matrix(rot_des @ rot.T)])
-    vel_err = jp.concatenate([com_vel_des - com_vel, ang_vel_des - ang_vel])
-    qdd_des = params.kp * pose_err + params.kd * vel_err  # (6,) eq. 9
+    qdd_des = desired_acceleration(
+        params, (com_pos, com_vel, rot, ang_vel), (com_pos_des, com_vel_des, rot_des, ang_vel_des)
+    )
     g_tilde = jp.array([0.0, 0.0, GRAVITY, 0.0, 0.0, 0.0], dtype)
     wrench_a = jp.concatenate([f_a / m, inertia_w_inv @ tau_a])  # A f_a + B tau_a
     b = qdd_des + g_tilde - wrench_a  # (6,)

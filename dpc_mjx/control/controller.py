@@ -8,12 +8,15 @@ env's `mjx.Data`; vmap at the call site. Controllers differ only in u:
 - `oracle`: u = the measured arm-mount wrench (privileged upper bound, `oracle_u`);
 - `observer`: u = the momentum observer's estimate (`observer.py`; no training, no force sensor):
   pass u = None to `LowLevelController.step`;
+- `feedforward`: u = the arms' model wrench (`arm_estimate.py`, from the arms' files and the
+  measured states): pass u = 0 and `add_model=True`; `feedforward_observer` adds the observer's
+  estimate of what the model leaves (`add_estimate=True` too);
 - anything else (the DPC policy): pass its u.
 
-The controller's model is the bare A1 (trunk + legs, mass and inertia at the home pose): the arm
-is exactly the disturbance it does not model. Every controller carries the observer in its state
-(`ControllerState.observer`, updated each tick from the data and the previous tick's commanded
-forces); only `observer` feeds its estimate back as u.
+The balance QP's model is the bare base (trunk + legs, mass and inertia at the home pose): the
+arm is exactly the disturbance it does not model. Every controller carries the observer and the
+arms' model wrench in its state (`ControllerState.observer`, `.arm`, updated each tick from the
+data and the previous tick's commanded forces); only the controllers above feed them back.
 """
 
 from __future__ import annotations
@@ -25,10 +28,18 @@ import jax.numpy as jp
 import mujoco
 from flax import struct
 
+from dpc_mjx.control import arm_estimate as arm_estimate_lib
 from dpc_mjx.control import balance, gait, qp, sensors, swing
 from dpc_mjx.control import observer as observer_lib
+from dpc_mjx.control.arm_model import ArmModel, arm_model
 from dpc_mjx.control.base_scaling import base_scale, scaled_config
-from dpc_mjx.control.state import BodyState, StateIndex, read_state, state_index
+from dpc_mjx.control.state import (
+    BodyState,
+    StateIndex,
+    legs_weight_wrench,
+    read_state,
+    state_index,
+)
 from dpc_mjx.robots.layout import Layout, layout, mount_wrench
 from dpc_mjx.rotations import rot_z, yaw_of
 
@@ -49,6 +60,9 @@ class ControllerConfig:
     observer: observer_lib.ObserverConfig = struct.field(
         default_factory=observer_lib.ObserverConfig
     )  # gains of the disturbance observer (rad/s)
+    arm_estimate: arm_estimate_lib.ArmEstimateConfig = struct.field(
+        default_factory=arm_estimate_lib.ArmEstimateConfig
+    )  # how the arms' model wrench reads its accelerations
 
 
 @struct.dataclass
@@ -61,6 +75,7 @@ class ControllerState:
     qp: qp.QPResult  # warm start for the next balance QP
     forces: jax.Array  # (4, 3) last ground reaction forces asked of the stance feet, N
     observer: observer_lib.ObserverState  # the disturbance observer, updated every tick
+    arm: arm_estimate_lib.ArmEstimate  # the arms' model wrench, updated every tick
 
 
 @struct.dataclass
@@ -86,6 +101,7 @@ class LowLevelController:
     config: ControllerConfig
     arm_home: jax.Array  # (n_arm_act,) servo targets of the home pose
     fall_height: float  # m: the base's trunk below this has fallen (`state.has_fallen`)
+    arm: ArmModel | None  # the arms' rigid-body model (None: no arm)
 
     def init(self, d) -> ControllerState:
         s = read_state(self.idx, d)
@@ -98,12 +114,38 @@ class LowLevelController:
             qp=qp.QPResult.zeros(balance.N_VARS, balance.N_ROWS),  # the first tick starts cold
             forces=jp.zeros((4, 3)),
             observer=observer_lib.init(self.config.observer, self.config.balance, s),
+            arm=arm_estimate_lib.init(s, d.qvel[self.lay.arm_dof]),
         )
 
-    def _observe(self, cs: ControllerState, s: BodyState) -> observer_lib.ObserverState:
+    def _arm_wrench(
+        self, cs: ControllerState, d, p: Plan, targets: jax.Array, noise
+    ) -> arm_estimate_lib.ArmEstimate:
+        """The arms' model wrench of this tick from the measured state (`arm_estimate`)."""
+        if self.arm is None:
+            return cs.arm
+        s = p.state
+        measured = arm_estimate_lib.read_sensors(self.lay, d, noise)
+        lever = s.rot @ jp.asarray(self.idx.com_offset, jp.float32)  # base COM - trunk origin
+        state = (s.com_pos, s.com_vel, s.rot, s.ang_vel)
+        desired = balance.desired_acceleration(self.config.balance, state, _desired_state(p))
+        config = self.config.arm_estimate
+        return arm_estimate_lib.update(
+            config, self.arm, cs.arm, s, measured, targets, lever, desired, self.dt
+        )
+
+    def _observe(
+        self, cs: ControllerState, s: BodyState, also_known: jax.Array
+    ) -> observer_lib.ObserverState:
         cfg = self.config
         return observer_lib.update(
-            cfg.observer, cfg.balance, cs.observer, s, cs.forces, self.dt, self.lay.foot_radius
+            cfg.observer,
+            cfg.balance,
+            cs.observer,
+            s,
+            cs.forces,
+            self.dt,
+            self.lay.foot_radius,
+            also_known,
         )
 
     def plan(
@@ -134,10 +176,7 @@ class LowLevelController:
             s.com_vel,
             s.rot,
             s.ang_vel,
-            p.pos_des,
-            p.vel_des,
-            rot_z(p.yaw_des),
-            jp.array([0.0, 0.0, p.yaw_rate_des]),
+            *_desired_state(p),
             contact_points,
             p.stance,
             u[:3],
@@ -178,23 +217,38 @@ class LowLevelController:
         arm_targets: jax.Array | None = None,
         noise: sensors.SensorNoise | None = None,
         add_estimate: bool | jax.Array = False,
+        add_model: bool | jax.Array = False,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
         the disturbance observer's estimate of this tick (the `observer` controller), or with
         `add_estimate` a residual added to that estimate (DPC on the observer,
         `EnvConfig.u_base`; a traced () bool where each env of a batch has its own controller,
-        `envs.controller_batch`); `noise` the measurement errors of this tick
+        `envs.controller_batch`); `add_model` adds the arms' model wrench of this tick
+        (`arm_estimate`; the `feedforward` controllers, DPC on the model), and with
+        `add_estimate` too the observer estimates what the model leaves (the model wrench is
+        then among its known wrenches); `noise` the measurement errors of this tick
         (`control/sensors.py`; None: exact sensors).
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
         cfg = self.config
         p = self.plan(cs, d, command, noise)
         s, stance = p.state, p.stance
-        observed = self._observe(cs, s)  # this tick's data, the previous tick's forces
+        targets = self.arm_home if arm_targets is None else arm_targets
+        arm = self._arm_wrench(cs, d, p, targets, noise)
+        # with the model and the observer both (`feedforward_observer`), the observer estimates
+        # what the model leaves: the model wrench and the legs' weight at the feet (its bias on
+        # a bare base, `state.legs_weight_wrench`) among its known wrenches
+        known = 0.0
+        if self.arm is not None:  # without the arms' model no controller adds it
+            legs = legs_weight_wrench(self.idx, d, s, cs.stance, self.lay.foot_radius)
+            known = jp.where(add_model & jp.asarray(add_estimate), arm.wrench + legs, 0.0)
+        observed = self._observe(cs, s, known)  # this tick's data, the previous tick's forces
         if u is None:
             u = observed.estimate
         elif add_estimate is not False:  # True, or a traced () bool (selects per env)
             u = jp.where(add_estimate, observed.estimate + u, u)
+        if add_model is not False:
+            u = jp.where(add_model, u + arm.wrench, u)
         prob = self.balance_qp(p, u)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
@@ -211,19 +265,18 @@ class LowLevelController:
 
         ctrl = jp.zeros(d.ctrl.shape).at[self.lay.leg_act].set(tau)
         if self.lay.arms:
-            targets = self.arm_home if arm_targets is None else arm_targets
             ctrl = ctrl.at[self.lay.arm_act].set(targets)
         new = ControllerState(
-            t=cs.t + self.dt,
-            pos_des=p.pos_des,
-            yaw_des=p.yaw_des,
-            swing_start=swing_start,
-            stance=stance,
-            qp=res,
-            forces=forces,
-            observer=observed,
-        )
+            t=cs.t + self.dt, pos_des=p.pos_des, yaw_des=p.yaw_des, swing_start=swing_start,
+            stance=stance, qp=res, forces=forces, observer=observed, arm=arm,
+        )  # fmt: skip
         return new, ctrl
+
+
+def _desired_state(p: Plan) -> tuple[jax.Array, ...]:
+    """(COM position (3,) m, COM velocity (3,) m/s, trunk rotation (3, 3), angular velocity
+    (3,) rad/s) the plan asks for, world frame: the balance QP's targets (eq. 9)."""
+    return p.pos_des, p.vel_des, rot_z(p.yaw_des), jp.array([0.0, 0.0, p.yaw_rate_des])
 
 
 def make_controller(
@@ -231,10 +284,11 @@ def make_controller(
     config: ControllerConfig | None = None,
     gait_: gait.Gait | None = None,
     observer: observer_lib.ObserverConfig | None = None,
+    arm_estimate: arm_estimate_lib.ArmEstimateConfig | None = None,
 ) -> LowLevelController:
     """A controller for a compiled variant. The balance model is the bare base (see module doc);
-    the default config is the A1's scaled to the base (`control.base_scaling`); `observer`, if
-    given, replaces the config's observer (gains, delay)."""
+    the default config is the A1's scaled to the base (`control.base_scaling`); `observer` and
+    `arm_estimate`, if given, replace the config's (gains, delay; the arms' accelerations)."""
     lay = layout(model)
     idx = state_index(model, lay)
     scale = base_scale(idx)
@@ -243,7 +297,10 @@ def make_controller(
         config = scaled_config(a1_config, scale, lay, idx)
     if observer is not None:
         config = config.replace(observer=observer)
+    if arm_estimate is not None:
+        config = config.replace(arm_estimate=arm_estimate)
     config.observer.validate(float(model.opt.timestep))
+    config.arm_estimate.validate()
     arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)
     return LowLevelController(
         idx=idx,
@@ -252,6 +309,7 @@ def make_controller(
         config=config,
         arm_home=arm_home,
         fall_height=scale.fall_height,
+        arm=arm_model(model, lay) if lay.arms else None,
     )
 
 

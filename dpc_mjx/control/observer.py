@@ -168,15 +168,18 @@ def update(
     forces: jax.Array,
     dt: float,
     foot_radius: float,
+    also_known: jax.Array | float = 0.0,
 ) -> ObserverState:
     """One tick: `s` the body state read now, `forces` (4, 3) the ground forces commanded at
-    the previous tick (N, world), `dt` (s) the tick, `foot_radius` (m) the base's feet's.
+    the previous tick (N, world), `dt` (s) the tick, `foot_radius` (m) the base's feet's,
+    `also_known` (6,) a wrench on the base the estimate leaves out (N, N·m, world, about the
+    base's COM: the arms' model wrench for `feedforward_observer`; 0: none).
     r_k = K (p_k - predicted_k), see module doc; with `config.delay` D the known wrench is that
     of the forces commanded D ticks before `forces`."""
     acting, pending = forces, ob.pending
     if config.delay:  # the oldest pending forces acted over the tick just past
         acting, pending = ob.pending[0], jp.concatenate([ob.pending[1:], forces[None]])
-    wrench = known_wrench(model, s, acting, foot_radius)
+    wrench = known_wrench(model, s, acting, foot_radius) + also_known
     predicted = ob.predicted + (wrench + ob.estimate) * ob.elapsed
     estimate = config.gains() * (momentum(model, s) - predicted)
     return ObserverState(

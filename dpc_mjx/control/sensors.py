@@ -20,6 +20,14 @@ together by `EnvConfig.sensor_noise` (0: exact sensors; 1: the values below):
     arm joint positions (rad or m)          0.001    -      Dynamixel XM430 class: 4096
                                                             counts/rev (0.0015 rad)
     arm joint velocities (rad/s or m/s)     0.025    -      its velocity unit, 0.229 rpm
+    trunk specific acceleration             0.1      0.05   MEMS accelerometer (BMI088 class:
+      (m/s^2, trunk frame; what the                         175 ug/sqrt(Hz), 0.02 m/s^2 over
+      accelerometer reads)                                  125 Hz) with vibration; bias left
+                                                            after calibration (~5 mg)
+
+The accelerometer's errors are drawn from keys of their own (folded from the tick's and the
+episode's), so every other error is drawn as before it was measured; it is read by the arms'
+model wrench only (`control/arm_estimate.py`).
 
 Delay (`EnvConfig.sensor_delay`, ticks of 4 ms): the ctrl computed from the measurement of tick
 k acts from tick k + delay (default 1: 4 ms from measurement to torque, an A1 low-level loop's
@@ -52,6 +60,8 @@ LEG_Q = (0.001, 0.0)  # rad
 LEG_QD = (0.05, 0.0)  # rad/s
 ARM_Q = (0.001, 0.0)  # rad (m for a finger)
 ARM_QD = (0.025, 0.0)  # rad/s (m/s)
+ACCEL = (0.1, 0.05)  # m/s^2, trunk frame
+_ACCEL_STREAM = 1000  # folded into a key: the accelerometer's own draws
 
 
 @struct.dataclass
@@ -65,6 +75,7 @@ class SensorNoise:
     leg_qd: jax.Array  # (12,) rad/s
     arm_q: jax.Array  # (n,) arm joints in layout order
     arm_qd: jax.Array  # (n,)
+    accel: jax.Array  # (3,) m/s^2, trunk frame
 
 
 _SPECS = {  # field -> (std, bias) at scale 1
@@ -93,7 +104,7 @@ def _sizes(n_arm: int) -> dict[str, int]:
 def zeros(n_arm: int) -> SensorNoise:
     """No errors (exact sensors), for an arm of `n_arm` joints."""
     sizes = _sizes(n_arm)
-    return SensorNoise(**{name: jp.zeros(sizes[name]) for name in _SPECS})
+    return SensorNoise(**{name: jp.zeros(sizes[name]) for name in _SPECS}, accel=jp.zeros(3))
 
 
 def draw_bias(key: jax.Array, n_arm: int, scale: float) -> SensorNoise:
@@ -104,7 +115,8 @@ def draw_bias(key: jax.Array, n_arm: int, scale: float) -> SensorNoise:
         **{
             name: scale * bound * jax.random.uniform(k, (sizes[name],), minval=-1.0, maxval=1.0)
             for k, (name, (_, bound)) in zip(keys, _SPECS.items(), strict=True)
-        }
+        },
+        accel=scale * ACCEL[1] * jax.random.uniform(_accel_key(key), (3,), minval=-1, maxval=1),
     )
 
 
@@ -116,8 +128,14 @@ def draw(key: jax.Array, bias: SensorNoise, scale: float) -> SensorNoise:
             name: getattr(bias, name)
             + scale * std * jax.random.normal(k, getattr(bias, name).shape)
             for k, (name, (std, _)) in zip(keys, _SPECS.items(), strict=True)
-        }
+        },
+        accel=bias.accel + scale * ACCEL[0] * jax.random.normal(_accel_key(key), (3,)),
     )
+
+
+def _accel_key(key: jax.Array) -> jax.Array:
+    """The accelerometer's key, apart from the other errors' (module docstring)."""
+    return jax.random.fold_in(key, _ACCEL_STREAM)
 
 
 def measured(s: BodyState, noise: SensorNoise) -> BodyState:

@@ -43,6 +43,10 @@ class StateIndex:
     base_inertia: np.ndarray  # (3, 3) kg·m², about the base's COM, trunk frame, at home
     home_height: float  # m, the trunk's origin above the floor at home
     leg_length: float  # m, mean over legs of thigh joint -> knee joint -> foot centre at home
+    leg_bodies: np.ndarray  # (4, 3) the bodies the leg joints move, hip to knee
+    leg_axes: np.ndarray  # (4, 3, 3) each joint's axis in its body's frame
+    leg_anchors: np.ndarray  # (4, 3, 3) m, each joint's position in its body's frame
+    leg_subtree_mass: np.ndarray  # (4, 3) kg: the leg's links beyond each of its joints
 
 
 def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
@@ -84,6 +88,10 @@ def state_index(model: mujoco.MjModel, lay: Layout) -> StateIndex:
         base_inertia=trunk_rot.T @ inertia @ trunk_rot,
         home_height=float(model.key_qpos[0][model.jnt_qposadr[model.body_jntadr[trunk]] + 2]),
         leg_length=float(np.mean(thigh + shank)),
+        leg_bodies=model.jnt_bodyid[lay.leg_joints].reshape(4, 3),
+        leg_axes=model.jnt_axis[lay.leg_joints].reshape(4, 3, 3),
+        leg_anchors=model.jnt_pos[lay.leg_joints].reshape(4, 3, 3),
+        leg_subtree_mass=model.body_subtreemass[model.jnt_bodyid[lay.leg_joints]].reshape(4, 3),
     )
 
 
@@ -124,3 +132,23 @@ def has_fallen(trunk_height: jax.Array, roll_pitch: jax.Array, fall_height: floa
     `control.base_scaling.BaseScale.fall_height`; the A1's 0.15 m) or |roll| or |pitch| (rad,
     `roll_pitch` (..., 2)) above `FALL_TILT`."""
     return (trunk_height < fall_height) | jp.any(jp.abs(roll_pitch) > FALL_TILT, axis=-1)
+
+
+def legs_weight_wrench(idx: StateIndex, d, s: BodyState, stance: jax.Array, foot_radius: float):
+    """(6,) [f (N), tau (N·m) about the base's COM], world: what the legs' own weight adds to the
+    ground's force on the stance feet (`stance` (4,) bool), which tau = J^T f does not carry.
+    Each leg joint j must hold g_j = -a_j . sum over the links beyond it of (c_k - p_j) x m_k
+    g_vec (its gravity torque: axis a_j, anchor p_j; the links' COM and mass as MuJoCo's
+    subtree of the joint's body), so a foot pushes the ground with df = J^-T g (per leg, J its
+    foot Jacobian) more than asked: the bias of the momentum observer's estimate on a bare base
+    (control/observer.py). Positions, axes and COMs from the data's kinematics."""
+    weight = jp.asarray(idx.leg_subtree_mass, jp.float32)[..., None] * jp.array([0.0, 0.0, -9.81])
+    rot = d.xmat[idx.leg_bodies]  # (4, 3, 3, 3) body -> world
+    anchors = d.xpos[idx.leg_bodies] + jp.einsum("lkij,lkj->lki", rot, idx.leg_anchors)
+    axes = jp.einsum("lkij,lkj->lki", rot, idx.leg_axes)  # (4, 3, 3) world
+    coms = d.subtree_com[idx.leg_bodies]  # (4, 3, 3) m: the COM of each joint's subtree
+    torque = -jp.sum(axes * jp.cross(coms - anchors, weight), axis=-1)  # (4, 3) N·m
+    extra = jp.linalg.solve(jp.swapaxes(s.foot_jac, 1, 2), torque[..., None])[..., 0]  # (4, 3)
+    extra = extra * stance[:, None]
+    contact = s.foot_pos.at[:, 2].add(-foot_radius)
+    return jp.concatenate([extra.sum(0), jp.cross(contact - s.com_pos, extra).sum(0)])

@@ -51,6 +51,8 @@ with done = 1 and is counted in `metrics['nan_resets']`; the auto-reset wrapper
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jp
 import mujoco
@@ -65,7 +67,7 @@ from dpc_mjx.control.state import has_fallen
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
-from dpc_mjx.envs.disturbances import Disturbances, make_sampler
+from dpc_mjx.envs.disturbances import Disturbances, ee_wrench, make_sampler
 from dpc_mjx.envs.outcome import METRICS
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import make_physics, resolve_engine
@@ -101,8 +103,14 @@ class DpcEnv(Env):
         self.mx = sim.put_model(self.model)
         self.physics = make_physics(config.engine, self.model, self.mx)
         self.controller = make_controller(
-            self.model, gait_=_GAITS[config.gait](), observer=config.observer_config()
+            self.model,
+            gait_=_GAITS[config.gait](),
+            observer=config.observer_config(),
+            arm_estimate=config.arm_estimate_config(),
         )
+        # on for the controllers that add it, and under u_base 'model' (the data its policy is
+        # regressed on records it: `adapter.data.Dataset.u_model`)
+        self.use_arm_model(config.controller.adds(config.u_base)[1] or config.u_base == "model")
         self.props = prop_layout(self.model)
         self.sampler = make_sampler(config, self.model, self.lay, len(self.props.objects))
         self.obs_layout = observations.ObsLayout.of(self.lay)
@@ -111,6 +119,16 @@ class DpcEnv(Env):
         self._ee_bodies = self.model.site_bodyid[self._ee_sites]
         self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
         self._arm_masses = jp.asarray(self.model.body_mass[self.lay.arm_bodies], jp.float32)  # kg
+
+    def use_arm_model(self, on: bool) -> None:
+        """Whether the controller computes the arms' model wrench every tick (`arm_estimate`;
+        off, `ControllerState.arm` stays at its reset): it slows the env step by about a fifth
+        (docs/benchmarks.md, "The arms' model wrench"), so only the envs that read it compute
+        it (`__init__`; `ControllerBatch` turns it on for a batch with a controller that adds
+        it)."""
+        self._arm_model = getattr(self, "_arm_model", self.controller.arm)
+        arm = self._arm_model if on else None
+        self.controller = dataclasses.replace(self.controller, arm=arm)
 
     # task hooks -----------------------------------------------------------------------------
 
@@ -277,12 +295,15 @@ class DpcEnv(Env):
         def substep(carry, tick_key):
             d, cs, queue, _ = carry
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
-            u, add = self.controller_u(d, u_policy, info.get("controller"))
+            u, add, model = self.controller_u(d, u_policy, info.get("controller"))
             targets = self.arm_targets(dist, d.time, d)
-            cs, ctrl = self.controller.step(cs, d, command, u, targets, noise, add_estimate=add)
+            cs, ctrl = self.controller.step(
+                cs, d, command, u, targets, noise, add_estimate=add, add_model=model
+            )
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
-            xfrc = self._ee_wrench(d, self.sampler.ee_forces(dist, d.time, self._yaw(d)))
+            forces = self.sampler.ee_forces(dist, d.time, self._yaw(d))
+            xfrc = ee_wrench(self.model.nbody, self._ee_sites, self._ee_bodies, d, forces)
             xfrc = xfrc.at[self._object_bodies, :3].add(self.sampler.object_forces(dist))
             d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time, dist)
             d = self.physics.step(d)
@@ -300,29 +321,27 @@ class DpcEnv(Env):
         return self._u_scale * jp.clip(action, -1.0, 1.0)
 
     def controller_u(self, d, u_policy: jax.Array, controller: jax.Array | None = None):
-        """(u, add) of this tick for the controller: u (6,) in the world frame, about the
-        base's COM (None: the observer's own estimate of the tick), and whether the controller
-        adds its estimate to u (DPC with `u_base` 'observer'). By `config.controller`, or, given
-        `controller`, a traced () int32 `Controller.index` (each env of a batch its own:
-        `envs.controller_batch`). `u_policy` from `policy_u` (used by 'dpc' only)."""
+        """(u, add_estimate, add_model) of this tick for the controller: u (6,) in the world
+        frame, about the base's COM (None: the observer's own estimate of the tick), whether the
+        controller adds the observer's estimate to u and whether it adds the arms' model wrench
+        (`LowLevelController.step`). By `config.controller`, or, given `controller`, a traced ()
+        int32 `Controller.index` (each env of a batch its own: `envs.controller_batch`).
+        `u_policy` from `policy_u` (used by 'dpc' only)."""
+        zero = jp.zeros(ACTION_SIZE)
+        u_of = {Controller.DPC: self._dpc_u(d, u_policy), Controller.ORACLE: self._oracle(d)}
         if controller is not None:
-            zero = jp.zeros(ACTION_SIZE)
-            u_of = {Controller.MBC: zero, Controller.OBSERVER: zero}
-            u_of |= {Controller.DPC: self._dpc_u(d, u_policy), Controller.ORACLE: self._oracle(d)}
-            adds = {Controller.OBSERVER: True, Controller.DPC: self.config.u_base == "observer"}
-            u = jp.stack([u_of[c] for c in Controller])[controller]  # (6,) this env's row
-            return u, jp.array([adds.get(c, False) for c in Controller])[controller]
-        if self.config.controller == "mbc":
-            return jp.zeros(ACTION_SIZE), False
-        if self.config.controller == "oracle":
-            return self._oracle(d), False
-        if self.config.controller == "observer":
-            return None, False  # the controller's own observer estimate of this tick
-        return self._dpc_u(d, u_policy), self.config.adds_observer_estimate
+            u = jp.stack([u_of.get(c, zero) for c in Controller])[controller]  # (6,) its row
+            adds = jp.array([c.adds(self.config.u_base) for c in Controller])  # (n_c, 2) bool
+            return u, adds[controller, 0], adds[controller, 1]
+        c = self.config.controller
+        if c == Controller.OBSERVER:
+            return None, False, False  # the controller's own observer estimate of this tick
+        return u_of.get(c, zero), *c.adds(self.config.u_base)
 
     def _dpc_u(self, d, u_policy: jax.Array) -> jax.Array:
         """(6,) the policy's u in the world frame (turned from the yaw frame, `u_frame`), plus
-        the arms' gravity wrench with `u_base` 'gravity'."""
+        the arms' gravity wrench with `u_base` 'gravity' (the observer's estimate and the arms'
+        model wrench are added by the controller: `controller_u`)."""
         if self.config.u_frame == "yaw":  # the policy's u turns with the heading
             u_policy = wrench_to_world(u_policy, self._yaw(d))
         if self.config.u_base == "gravity":
@@ -368,18 +387,6 @@ class DpcEnv(Env):
         idx = self.controller.idx
         offset = jp.asarray(idx.com_offset, jp.float32)
         return d.xpos[idx.trunk] + d.xmat[idx.trunk] @ offset
-
-    def _ee_wrench(self, d, forces: jax.Array) -> jax.Array:
-        """(nbody, 6) xfrc_applied: each (3,) force of `forces` (k, 3) at its `ee` site.
-
-        xfrc_applied acts at the body COM (world frame, force then torque), so the force is
-        moved to the site with the torque (site - COM) x F."""
-        xfrc = jp.zeros((self.model.nbody, 6))
-        if not len(self._ee_sites):
-            return xfrc
-        lever = d.site_xpos[self._ee_sites] - d.xipos[self._ee_bodies]
-        wrench = jp.concatenate([forces, jp.cross(lever, forces)], axis=1)
-        return xfrc.at[self._ee_bodies].add(wrench)
 
     def _privileged(self, d, dist) -> jax.Array:
         """(10,) [u_oracle (6), payload (1), ee push force (3)], see `observations.PRIVILEGED`."""

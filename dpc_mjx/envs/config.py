@@ -20,6 +20,7 @@ import dataclasses
 import math
 from typing import Any
 
+from dpc_mjx.control.arm_estimate import BASE_ACC_SOURCES, QDD_SOURCES, ArmEstimateConfig
 from dpc_mjx.control.observer import ObserverConfig
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
@@ -27,7 +28,8 @@ from dpc_mjx.physics import ENGINE_CHOICES
 
 CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
-U_BASES = ("zero", "observer", "gravity")  # what DPC's policy u is added to (`EnvConfig.u_base`)
+# what DPC's policy u is added to (`EnvConfig.u_base`)
+U_BASES = ("zero", "observer", "gravity", "model")
 GAITS = ("trot", "stand")
 
 
@@ -111,7 +113,9 @@ class EnvConfig:
     # u_oracle - u_obs, `policy.regression`), or 'gravity' (u = the arms' weight and its torque
     # about the base's COM, from the arm file's masses at the arm's pose of each tick
     # (`DpcEnv.arm_gravity`), + the policy's u, trained on u_oracle - u_gravity: the learned part
-    # is the arm's motion, its weight comes from its file)
+    # is the arm's motion, its weight comes from its file), or 'model' (u = the arms' model
+    # wrench of each tick, their inverse dynamics from the measured states (`arm_estimate`),
+    # + the policy's u, trained on u_oracle - u_model: the learned part is what the model misses)
     u_base: str = "zero"
     max_force: float | tuple[float, float, float] = (15.0, 15.0, 60.0)  # N
     max_torque: float | tuple[float, float, float] = (12.0, 12.0, 3.0)  # N·m
@@ -135,6 +139,16 @@ class EnvConfig:
     # of the previous tick).
     observer_gain: float | tuple[float, float] = 20.0
     observer_aligned: bool = False
+
+    # The arms' model wrench (`control/arm_estimate.py`; the 'feedforward' controllers' u and
+    # DPC's with u_base 'model'): the arms' joint accelerations from their servo targets
+    # ('servo': the arm's own dynamics under its servo law) or from the encoders' velocity
+    # difference ('difference'); the trunk's accelerations the balance QP asks for ('desired':
+    # the arms as a composite rigid body with the base) or measured ('measured': accelerometer,
+    # gyro difference); the time constant (s) of the differences' low-pass.
+    arm_qdd: str = "servo"
+    arm_base_acc: str = "desired"
+    arm_filter_s: float = 0.02
 
     # Initial state: home pose, leg joints offset ~ U(-joint_noise, joint_noise) rad.
     joint_noise: float = 0.05
@@ -216,11 +230,18 @@ class EnvConfig:
         delay = self.sensor_delay if self.observer_aligned else 0  # ticks
         return ObserverConfig(k_force=k_force, k_torque=k_torque, delay=delay)
 
+    def arm_estimate_config(self) -> ArmEstimateConfig:
+        """How the arms' model wrench reads its accelerations (`arm_qdd`, `arm_base_acc`,
+        `arm_filter_s`)."""
+        return ArmEstimateConfig(
+            qdd=self.arm_qdd, base_acc=self.arm_base_acc, filter_s=self.arm_filter_s
+        )
+
     @property
     def adds_observer_estimate(self) -> bool:
-        """Whether the controller adds the observer's estimate to the given u (DPC with
-        `u_base` 'observer')."""
-        return self.controller == Controller.DPC and self.u_base == "observer"
+        """Whether the controller adds the observer's estimate to the given u (the observer
+        controllers, DPC with `u_base` 'observer': `Controller.adds`)."""
+        return self.controller.adds(self.u_base)[0]
 
     def replace(self, **overrides: Any) -> EnvConfig:
         """A validated copy with `overrides` by field name, or a whole part by its name
@@ -254,6 +275,9 @@ class EnvConfig:
         _int("sensor_delay", self.sensor_delay, 0, 10)
         check_number_or_pair("observer_gain", self.observer_gain, 1.0, 200.0)
         _bool("observer_aligned", self.observer_aligned)
+        _choice("arm_qdd", self.arm_qdd, QDD_SOURCES)
+        _choice("arm_base_acc", self.arm_base_acc, BASE_ACC_SOURCES)
+        _number("arm_filter_s", self.arm_filter_s, 0.0, 1.0)
         for name in ("max_force", "max_torque"):
             _axes(name, getattr(self, name))
         for name in ("policy_dt", "explode_speed", "reach_move_time"):

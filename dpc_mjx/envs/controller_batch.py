@@ -38,6 +38,8 @@ class ControllerBatch:
         if not self.controllers:
             raise DpcError("ControllerBatch needs at least one controller.")
         self.env = env
+        dpc = getattr(env, "env", env)  # a ModelBatchEnv's DpcEnv, or the DpcEnv
+        dpc.use_arm_model(any(c.adds(env.config.u_base)[1] for c in self.controllers))
         self._reset, self._step = batch_fns(env)
         self.TASK_MEASURES = getattr(env, "TASK_MEASURES", ())
         self.config = env.config

@@ -159,6 +159,20 @@ class DisturbanceSampler:
         )
 
 
+def ee_wrench(nbody: int, ee_sites, ee_bodies, d, forces: jax.Array) -> jax.Array:
+    """(nbody, 6) xfrc_applied: each (3,) force of `forces` (k, 3) at its end-effector site
+    `ee_sites` (k,), on the body `ee_bodies` (k,) that holds it.
+
+    xfrc_applied acts at the body COM (world frame, force then torque), so the force is moved to
+    the site with the torque (site - COM) x F."""
+    xfrc = jp.zeros((nbody, 6))
+    if not len(ee_sites):
+        return xfrc
+    lever = d.site_xpos[ee_sites] - d.xipos[ee_bodies]
+    wrench = jp.concatenate([forces, jp.cross(lever, forces)], axis=1)
+    return xfrc.at[ee_bodies].add(wrench)
+
+
 def integrate_command(pose: jax.Array, command: jax.Array, dt: float) -> jax.Array:
     """(3,) the desired pose [x, y (m, world), heading (rad)] after `dt` s at `command` (3,)
     [v_x, v_y (m/s, yaw frame), yaw rate (rad/s)] (explicit Euler: the velocity turned by the

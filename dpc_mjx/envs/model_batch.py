@@ -15,6 +15,7 @@ rollout core reads): reset keys (B, 2) -> State (B, ...), step (State (B, ...), 
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import jax
 from brax.envs.base import State
@@ -64,10 +65,11 @@ class ModelBatchEnv:
 
 def on_model(env: DpcEnv, mx: mjx.Model) -> DpcEnv:
     """`env` on `mx`, a model of the same structure with other continuous values (one element
-    of `robots.arms.params.batch_arm_params`'s batch, inside `jax.vmap`). Physics, the data and the
-    end-effector Jacobians use `mx`; the controller keeps its model of the bare base, which an
-    arm's parameters do not touch. MJX engine only (the native engine steps the one compiled
-    `MjModel`)."""
+    of `robots.arms.params.batch_arm_params`'s batch, inside `jax.vmap`). Physics, the data, the
+    end-effector Jacobians and what the env and its controller know of the arms (their masses,
+    their rigid-body model: `control.arm_model`) use `mx`; the controller keeps its model of the
+    bare base, which an arm's parameters do not touch. MJX engine only (the native engine steps
+    the one compiled `MjModel`)."""
     if env.config.engine != "mjx":
         raise DpcError(
             f"A batch of models runs on the MJX engine only (this env has engine="
@@ -76,6 +78,9 @@ def on_model(env: DpcEnv, mx: mjx.Model) -> DpcEnv:
     env = copy.copy(env)
     env.mx = mx
     env.physics = make_physics("mjx", env.model, mx)
+    env._arm_masses = mx.body_mass[env.lay.arm_bodies]  # kg, `DpcEnv.arm_gravity`'s
+    if env.controller.arm is not None:
+        env.controller = dataclasses.replace(env.controller, arm=env.controller.arm.on(mx))
     return env
 
 

@@ -23,6 +23,10 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
     u = u_gravity + u_scale * a where action_scaling.base is 'gravity': u_gravity the arms'
         weight and its torque about the base's COM at their present pose (from the arm's masses
         and kinematics; the robot computes it), in the policy's frame: `u(obs, yaw, u_gravity)`
+    u = u_model + u_scale * a where action_scaling.base is 'model': u_model the arms' model
+        wrench of the tick (their inverse dynamics from the measured joint and trunk states:
+        `dpc_mjx.control.arm_estimate`; the robot computes it), in the policy's frame:
+        `u(obs, yaw, u_model=)`
 
 Every size and the layout come from the sidecar: s_body = obs[start:stop] with
 `observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
@@ -188,7 +192,7 @@ class NumpyPolicy:
         self.s_body = s_body  # of the observation
         n_body = s_body.stop - s_body.start
         known = inputs in (["s_body", "z"], ["s_body", "z", "u_obs"]) and frame in ("yaw", "world")
-        known = known and (base in ("zero", "gravity") or (base == "observer" and frame == "yaw"))
+        known = known and (base in ("zero", *_ADDED) or (base == "observer" and frame == "yaw"))
         if not known or n_body + latent + n_obs != obs_size or s_body.stop > input_size:
             raise ValueError(
                 f"{d / SIDECAR}: s_body = obs[{s_body.start}:{s_body.stop}], latent_size "
@@ -283,30 +287,33 @@ class NumpyPolicy:
             )
         return self._action(x) * self.scale
 
-    def u(self, obs, yaw=None, u_gravity=None) -> np.ndarray:
+    def u(self, obs, yaw=None, u_gravity=None, u_model=None) -> np.ndarray:
         """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM: `residual(obs)`, plus
-        the observation's u_obs where `base` is 'observer', or `u_gravity` (..., 6; the arms'
-        weight and its torque at their pose, N and N·m in the policy's frame) where it is
-        'gravity'. Without `yaw`, in the policy's frame (`frame`), what the ONNX graph gives
-        (the residual); with the heading `yaw` (rad; () or (B,)), in the world frame: a
-        yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau] (a world-frame one as it is)."""
+        the observation's u_obs where `base` is 'observer', `u_gravity` (..., 6; the arms'
+        weight and its torque at their pose) where it is 'gravity', `u_model` (..., 6; the arms'
+        model wrench of the tick) where it is 'model', N and N·m in the policy's frame. Without
+        `yaw`, in the policy's frame (`frame`), what the ONNX graph gives (the residual); with
+        the heading `yaw` (rad; () or (B,)), in the world frame: a yaw-frame policy's u turned,
+        [R_z(yaw) f, R_z(yaw) tau] (a world-frame one as it is)."""
         x = self._obs(obs)
         u = self._residual(x)
         if self.base == "observer":  # x holds u_obs (`_obs` checked its size)
             u = u + x[..., self.input_size : self.input_size + _U_OBS_SIZE]
-        if self.base == "gravity" and u_gravity is None:
-            raise ValueError(
-                "This policy's u is added to the arms' gravity wrench (action_scaling.base "
-                "'gravity'): pass u_gravity (..., 6), the arms' weight and its torque about the "
-                "base's COM at their pose, N and N·m in the policy's frame."
-            )
-        if self.base != "gravity" and u_gravity is not None:
-            raise ValueError(
-                f"u_gravity is added only to a policy on the arms' gravity wrench; this policy's "
-                f"base is {self.base!r}: leave u_gravity out."
-            )
-        if u_gravity is not None:
-            u = u + np.broadcast_to(np.asarray(u_gravity, np.float64), u.shape)
+        given = {"gravity": u_gravity, "model": u_model}
+        for base, wrench in given.items():
+            if base == self.base and wrench is None:
+                raise ValueError(
+                    f"This policy's u is added to {_ADDED[base]} (action_scaling.base "
+                    f"{base!r}): pass u_{base} (..., 6), N and N·m about the base's COM in the "
+                    "policy's frame."
+                )
+            if base != self.base and wrench is not None:
+                raise ValueError(
+                    f"u_{base} is added only to a policy on {_ADDED[base]}; this policy's base "
+                    f"is {self.base!r}: leave u_{base} out."
+                )
+        if self.base in given:
+            u = u + np.broadcast_to(np.asarray(given[self.base], np.float64), u.shape)
         if self.frame == "world" or yaw is None:
             return u
         c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))
@@ -316,5 +323,11 @@ class NumpyPolicy:
             out[..., i + 1] = s * u[..., i] + c * u[..., i + 1]
         return out
 
+
+# The wrenches a robot computes and passes to `NumpyPolicy.u`, by action_scaling.base
+_ADDED = {
+    "gravity": "the arms' gravity wrench (their weight and its torque at their pose)",
+    "model": "the arms' model wrench (their inverse dynamics from the measured states)",
+}
 
 __all__ = ["FORMAT_VERSION", "NumpyPolicy", "read_tree"]

@@ -12,7 +12,8 @@ for the stacks that run ONNX (onnxruntime, TensorRT, C++ and ROS 2 nodes). It co
     x = concat of policy.inputs: s_body = obs[:, s_body], z, u_obs = obs[:, input_size:+6]
     u = u_scale * tanh(pi((x - mean_pi) / std_pi)[:, :action_size])   (+ u_obs where
         action_scaling.base is 'observer'; where it is 'gravity' the robot adds its arms'
-        weight and its torque at their pose, u_gravity, as `NumpyPolicy.u(obs, u_gravity=)`)
+        weight and its torque at their pose, u_gravity, as `NumpyPolicy.u(obs, u_gravity=)`,
+        where it is 'model' their model wrench, u_model, as `NumpyPolicy.u(obs, u_model=)`)
 
 E and pi are Gemm (x @ kernel + bias) layers with Relu between, the flax/brax MLPs. Every size,
 the layout and the scaling come from the sidecar (checked by `load`), the weights and the
@@ -60,7 +61,7 @@ class _Layers:
     action_size: int
     scale: np.ndarray  # (action_size,) N for f_a, N·m for tau_a per unit action
     frame: str  # of u: 'yaw' or 'world'
-    base: str  # what u_scale * a is added to: 'zero', 'observer' (u_obs, yaw frame) or 'gravity'
+    base: str  # u_scale * a added to: 'zero', 'observer' (u_obs, yaw frame), 'gravity', 'model'
 
 
 def import_onnx() -> Any:
@@ -186,7 +187,7 @@ def _nodes(g: _Graph, net: _Layers, obs: str, u: str) -> None:
     x = g.op("Concat", *(blocks[k]() for k in net.inputs), axis=1)
     logits = g.mlp(g.standardise(x, net.policy_norm, "policy_norm"), net.policy, "policy")
     action = g.op("Tanh", g.columns(logits, 0, net.action_size))
-    if net.base in ("zero", "gravity"):  # 'gravity': the robot adds its arms' weight to u
+    if net.base in ("zero", "gravity", "model"):  # the robot adds its arms' wrench to u
         g.op("Mul", action, g.const("u_scale", net.scale), out=u)
     else:  # 'observer': u = u_obs + u_scale * a
         residual = g.op("Mul", action, g.const("u_scale", net.scale))

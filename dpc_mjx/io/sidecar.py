@@ -19,10 +19,12 @@ Keys (format_version 1; `export` writes them all):
     decoder         {file, sha256, latent_size, out_size, sees_body, target_layout}
     encoders        {arm: {file, input_size, input_layout, arm_spec, sha256}}
     action_scaling  {u_scale (action_size,): N for f_a, N·m for tau_a; frame: 'yaw' or 'world'
-                    (env_config.u_frame; absent: world); base: 'zero', 'observer' or
-                    'gravity' (env_config.u_base; absent: zero), with 'observer' also observer
-                    {gain, aligned, sensor_delay}: u = u_obs + u_scale * a; with 'gravity'
-                    u = u_gravity + u_scale * a (the arms' weight at their pose); u: in words}
+                    (env_config.u_frame; absent: world); base: 'zero', 'observer', 'gravity'
+                    or 'model' (env_config.u_base; absent: zero), with 'observer' also
+                    observer {gain, aligned, sensor_delay}: u = u_obs + u_scale * a; with
+                    'gravity' u = u_gravity + u_scale * a (the arms' weight at their pose);
+                    with 'model' u = u_model + u_scale * a (the arms' inverse dynamics from the
+                    measured states, `control/arm_estimate.py`); u: in words}
     onnx            {opset, input, output, ...}: the graph `dpc-mjx onnx` writes of an arm
                     (`onnx_graph.py`); absent in sidecars written before it: `ONNX`
     env_config, sac_config, extra   as given to `export`, or null
@@ -79,6 +81,8 @@ def action_scaling(env_config: EnvConfig) -> dict:
         }
     if base == "gravity":
         words = f"u_gravity + {words} (u_gravity: the arms' weight and its torque at their pose)"
+    if base == "model":
+        words = f"u_model + {words} (u_model: the arms' inverse dynamics from measured states)"
     return entry | {"u": f"[f_a (N), tau_a (N m)] = {words}"}
 
 

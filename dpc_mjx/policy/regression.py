@@ -15,6 +15,7 @@ exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's 
 samples (`Dataset.u_oracle`, collected with MBC; with `EnvConfig.u_base` 'observer' the target is
 u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale, with
 'gravity' u_oracle - u_gravity, the part the arms' weight at their pose leaves, and
+with 'model' u_oracle - u_model, the part the arms' model wrench misses, and
 with `slow_s` > 0 only its fast part: minus its exponential average over `slow_s` seconds along
 each episode, `regression_target`); the
 observation statistics start from the same samples. The last `val_fraction` of the samples are
@@ -46,6 +47,7 @@ REGRESSION_TARGETS = {
     "zero": "the oracle's u",
     "observer": "u_oracle - u_obs",
     "gravity": "u_oracle - u_gravity",
+    "model": "u_oracle - u_model",
 }
 
 # `trainer` is SAC's (`sac.trainer.Trainer`, `Carry`), taken by what it has, so that this layer
@@ -136,7 +138,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
     """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
     -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
     same frame) where `u_base` is 'observer' (`EnvConfig.u_base`), minus the arms' gravity
-    wrench u_gravity (`Dataset.u_gravity`) where it is 'gravity'. With `slow_s` > 0 (s; one
+    wrench u_gravity (`Dataset.u_gravity`) where it is 'gravity', minus the arms' model wrench
+    u_model (`Dataset.u_model`) where it is 'model'. With `slow_s` > 0 (s; one
     number, or (force, torque) where 0 keeps that part whole; u_base 'observer' only) the
     residual d = u_oracle - u_obs loses its slow part, its exponential average along each
     episode (`slow_part`): u = d - slow(d), the correction of the observer's lag that a policy
@@ -154,6 +157,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
         raise DpcError("slow_s splits the observer's residual: it needs u_base='observer'.")
     elif u_base == "gravity":  # what the arms' weight at their pose leaves
         u = u - data.u_gravity_in(u_frame)
+    elif u_base == "model":  # what the arms' model wrench misses
+        u = u - data.u_model_in(u_frame)
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)
 
 

@@ -11,7 +11,7 @@ import warnings
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 
-CONTROLLER_NAMES = " ".join(c.value for c in Controller)  # mbc observer dpc oracle
+CONTROLLER_NAMES = " ".join(c.value for c in Controller)  # mbc observer ... oracle
 TASK_HELP = "a task (`dpc_mjx.envs.known_tasks()`; default: reaching, `envs.DEFAULT_TASK`)"
 
 

@@ -140,7 +140,7 @@ class RunConfig:
     # env steps of 20 ms per evaluation episode; None: the task's episode length (reaching 1000,
     # pushing 500: `EnvConfig.episode_length`, as `dpc-mjx eval`)
     eval_steps: int | None = None
-    eval_controllers: tuple[str, ...] = tuple(Controller)  # mbc, observer, dpc, oracle
+    eval_controllers: tuple[str, ...] = tuple(Controller)  # every one, the tables' order
     eval_chunk: int = 50  # env steps per compiled evaluation chunk at most (`run.eval.evaluate`)
     # How SAC's actor starts: "random" (the paper) or "oracle_regression" (ours: regressed on
     # the oracle's u over the adapter's samples, `policy.regression`; then SAC as usual)

@@ -43,7 +43,7 @@ from dpc_mjx.run.report import write_episodes_csv
 from dpc_mjx.stats import mcnemar_counts, mcnemar_p, mean_ci, paired_diff_ci, wilson_ci
 from dpc_mjx.writer import is_writer
 
-CONTROLLERS = tuple(Controller)  # mbc, observer, dpc, oracle: the tables' order
+CONTROLLERS = tuple(Controller)  # mbc, observer, feedforward(_observer), dpc, oracle: tables' order
 CHUNK = 50  # env steps per compiled chunk at most (`rollout.run_episodes`); more on a GPU
 
 
@@ -278,7 +278,7 @@ def paired_row(label: str, first: tuple, second: tuple) -> str:
 def paired_rows(cells: list[CellResult]) -> list[str]:
     """Markdown rows under `PAIRED_HEADER`: per arm, DPC (or else the observer) against each
     other controller evaluated on the same episodes, and the share of the MBC-to-oracle gap in
-    falls it closes ((MBC falls - its falls) / (MBC falls - oracle falls))."""
+    falls each estimate closes ((MBC falls - its falls) / (MBC falls - oracle falls))."""
     rows = []
     for arm in dict.fromkeys(c.arm for c in cells):
         mine = {c.controller: c for c in cells if c.arm == arm}
@@ -299,7 +299,7 @@ def paired_rows(cells: list[CellResult]) -> list[str]:
         mbc, oracle = mine.get(Controller.MBC), mine.get(Controller.ORACLE)
         if mbc is not None and oracle is not None and mbc.falls > oracle.falls:
             gap = mbc.falls - oracle.falls
-            for name in (Controller.DPC, Controller.OBSERVER):
+            for name in (c for c in Controller if c not in (Controller.MBC, Controller.ORACLE)):
                 if name in mine:
                     share = (mbc.falls - mine[name].falls) / gap
                     rows.append(
