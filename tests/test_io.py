@@ -920,3 +920,14 @@ def test_an_export_is_evaluated_with_the_engine_it_records_where_the_device_runs
     assert options["engine"] == "native"
     monkeypatch.setattr(shipped, "resolve_engine", lambda engine: "mjx")  # as on a GPU
     assert shipped.engine_of(b1) == "auto"
+
+
+def test_a_policy_compiles_as_a_function_or_as_data(exported):
+    """`jax.jit(policy)` (its weights constants of the program, as a user writes it) and the
+    policy passed as data (`rollout.make_chunk`'s one program for every export) act alike."""
+    policy = dio.load(exported).dpc_policy("regular")
+    obs = jp.asarray(_obs(N_IN["regular"] + 6, seed=23), jp.float32)
+    as_function = jax.jit(policy)(obs, None)
+    as_data = jax.jit(lambda p, x: p(x, None))(policy, obs)
+    np.testing.assert_allclose(as_function, as_data, atol=1e-6)
+    assert as_function.shape == (len(obs), 6)

@@ -112,6 +112,11 @@ class DpcPolicy:
         latent_obs = policy_observation(self.adapter_config, self.encoder, obs, self.policy.inputs)
         return act(self.policy, latent_obs)
 
+    def __hash__(self) -> int:
+        # by identity, as a function is: `jax.jit(policy)` compiles it with its weights as
+        # constants (the frozen dataclass's own hash would hash the weights' dicts and fail)
+        return id(self)
+
 
 def dpc_policy(
     adapter_config: AdapterConfig, encoder: EncoderState, policy: PolicyState
