@@ -14,7 +14,7 @@ Inputs at tick k (world frame; `BodyState` after the sensor model):
     q, qd                                 the arm encoders (with their errors)
     qdd                                   by `ArmEstimateConfig.qdd`:
         'servo'       what the arms' position servos do to the measured state toward this tick's
-                      targets (`arm_model.servo_qdd`: the arm's own dynamics, its servo law)
+                      targets (`arm_model.servo_motion`: the arm's own dynamics, its servo law)
         'difference'  the encoders' velocity difference (qd_k - qd_{k-1}) / dt, low-passed
 
 Each low-pass is first order, discrete at the tick: y_k = y_{k-1} + dt / (tau + dt) (x_k -
@@ -30,13 +30,13 @@ import jax.numpy as jp
 from flax import struct
 
 from dpc_mjx.control import arm_model
+from dpc_mjx.control.balance import GRAVITY
 from dpc_mjx.control.sensors import SensorNoise
 from dpc_mjx.control.state import BodyState
 from dpc_mjx.errors import DpcError
 
 QDD_SOURCES = ("servo", "difference")
 BASE_ACC_SOURCES = ("desired", "measured")
-GRAVITY = (0.0, 0.0, -9.81)  # m/s^2, world
 
 
 @struct.dataclass
@@ -108,7 +108,7 @@ def update(
     if config.base_acc == "desired":  # the trunk origin's, from the COM's: a_o = a_c - dw x r...
         dw, w = desired[3:], s.ang_vel
         a_origin = desired[:3] - jp.cross(dw, com) - jp.cross(w, jp.cross(w, com))
-        motion = (dw, a_origin - jp.asarray(GRAVITY))
+        motion = (dw, a_origin + jp.array([0.0, 0.0, GRAVITY]))  # a - g, g = (0, 0, -9.81)
     else:
         motion = (ang_acc, s.rot @ accel)
     base = arm_model.BaseMotion(

@@ -239,7 +239,8 @@ class LowLevelController:
         # what the model leaves: the model wrench and the legs' weight at the feet (its bias on
         # a bare base, `state.legs_weight_wrench`) among its known wrenches
         known = 0.0
-        if self.arm is not None:  # without the arms' model no controller adds it
+        both = add_model is not False and add_estimate is not False  # may be, at trace time
+        if self.arm is not None and both:  # without the arms' model no controller adds it
             legs = legs_weight_wrench(self.idx, d, s, cs.stance, self.lay.foot_radius)
             known = jp.where(add_model & jp.asarray(add_estimate), arm.wrench + legs, 0.0)
         observed = self._observe(cs, s, known)  # this tick's data, the previous tick's forces

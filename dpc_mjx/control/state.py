@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 from flax import struct
 
+from dpc_mjx.control.balance import GRAVITY
 from dpc_mjx.robots.layout import Layout
 
 
@@ -142,7 +143,8 @@ def legs_weight_wrench(idx: StateIndex, d, s: BodyState, stance: jax.Array, foot
     subtree of the joint's body), so a foot pushes the ground with df = J^-T g (per leg, J its
     foot Jacobian) more than asked: the bias of the momentum observer's estimate on a bare base
     (control/observer.py). Positions, axes and COMs from the data's kinematics."""
-    weight = jp.asarray(idx.leg_subtree_mass, jp.float32)[..., None] * jp.array([0.0, 0.0, -9.81])
+    mass = jp.asarray(idx.leg_subtree_mass, jp.float32)[..., None]  # (4, 3, 1) kg
+    weight = mass * jp.array([0.0, 0.0, -GRAVITY])  # (4, 3, 3) N, world
     rot = d.xmat[idx.leg_bodies]  # (4, 3, 3, 3) body -> world
     anchors = d.xpos[idx.leg_bodies] + jp.einsum("lkij,lkj->lki", rot, idx.leg_anchors)
     axes = jp.einsum("lkij,lkj->lki", rot, idx.leg_axes)  # (4, 3, 3) world

@@ -108,6 +108,7 @@ class DpcEnv(Env):
             observer=config.observer_config(),
             arm_estimate=config.arm_estimate_config(),
         )
+        self._arm_model = self.controller.arm  # None without an arm
         # on for the controllers that add it, and under u_base 'model' (the data its policy is
         # regressed on records it: `adapter.data.Dataset.u_model`)
         self.use_arm_model(config.controller.adds(config.u_base)[1] or config.u_base == "model")
@@ -126,7 +127,6 @@ class DpcEnv(Env):
         (docs/benchmarks.md, "The arms' model wrench"), so only the envs that read it compute
         it (`__init__`; `ControllerBatch` turns it on for a batch with a controller that adds
         it)."""
-        self._arm_model = getattr(self, "_arm_model", self.controller.arm)
         arm = self._arm_model if on else None
         self.controller = dataclasses.replace(self.controller, arm=arm)
 
