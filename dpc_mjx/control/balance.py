@@ -186,6 +186,24 @@ def _g_pattern() -> np.ndarray:
 G_PATTERN = _g_pattern()  # for qp.solve(..., g_pattern=G_PATTERN): 40 of G's 288 entries
 
 
+def wrench_matrix(
+    params: BalanceParams, com_pos: jax.Array, rot: jax.Array, foot_pos: jax.Array, contact
+) -> tuple[jax.Array, jax.Array]:
+    """M (6, 12) of eq. 5, rows (COM linear acc, world angular acc) per N of the stance feet's
+    forces (swing feet's columns zeroed), and I_w^-1 (3, 3), the yaw-frame approximation
+    R_z I_B^-1 R_z^T (1/(kg m^2), world). `com_pos` (3,) m, `rot` (3, 3) body -> world (only
+    its yaw is read), `foot_pos` (4, 3) m where the forces act, `contact` (4,) bool."""
+    dtype = jp.float32
+    rz = yaw_rotation(rot)
+    inertia_w_inv = rz @ jp.linalg.inv(params.inertia) @ rz.T  # (3, 3) yaw-frame approximation
+    r = foot_pos - com_pos  # (4, 3) lever arms
+    c = contact.astype(dtype)
+    lin = jp.tile(jp.eye(3, dtype=dtype) / params.mass, (1, N_FEET))  # (3, 12)
+    ang = jp.concatenate([inertia_w_inv @ skew(r[i]) for i in range(N_FEET)], axis=1)  # (3, 12)
+    M = jp.concatenate([lin, ang], axis=0) * jp.repeat(c, 3)[None, :]  # swing columns zeroed
+    return M, inertia_w_inv
+
+
 def desired_acceleration(params: BalanceParams, state: tuple, desired: tuple) -> jax.Array:
     """(6,) qdd_d = Kp (q_d - q) + Kd (qd_d - qd) (eq. 9): the COM's acceleration (m/s^2) and
     the trunk's angular acceleration (rad/s^2) the QP asks for, world frame. `state` and
@@ -211,6 +229,7 @@ def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts,
     contact: jax.Array,
     f_a: jax.Array,
     tau_a: jax.Array,
+    qdd_des: jax.Array | None = None,
 ) -> BalanceQP:
     """The balance QP of one env (unbatched; vmap it). World frame throughout.
 
@@ -228,22 +247,17 @@ def build_balance_qp(  # noqa: PLR0913, PLR0917 (state, desired state, contacts,
       contact: (4,) bool, True for a stance foot.
       f_a: (3,) force (N) and tau_a: (3,) torque about the COM (N·m) applied to the trunk by the
         arm / payload.
+      qdd_des: (6,) the acceleration to ask for (m/s^2, rad/s^2) in place of eq. 9's from the
+        desired state (None), e.g. the one an MPC's planned forces give (`control/mpc.py`).
     """
-    dtype = jp.float32
-    m = params.mass
-    rz = yaw_rotation(rot)
-    inertia_w_inv = rz @ jp.linalg.inv(params.inertia) @ rz.T  # (3, 3) yaw-frame approximation
-    r = foot_pos - com_pos  # (4, 3) lever arms
-    c = contact.astype(dtype)
-    lin = jp.tile(jp.eye(3, dtype=dtype) / m, (1, N_FEET))  # (3, 12)
-    ang = jp.concatenate([inertia_w_inv @ skew(r[i]) for i in range(N_FEET)], axis=1)  # (3, 12)
-    M = jp.concatenate([lin, ang], axis=0) * jp.repeat(c, 3)[None, :]  # swing columns zeroed
-
-    qdd_des = desired_acceleration(
-        params, (com_pos, com_vel, rot, ang_vel), (com_pos_des, com_vel_des, rot_des, ang_vel_des)
-    )
-    g_tilde = jp.array([0.0, 0.0, GRAVITY, 0.0, 0.0, 0.0], dtype)
-    wrench_a = jp.concatenate([f_a / m, inertia_w_inv @ tau_a])  # A f_a + B tau_a
+    M, inertia_w_inv = wrench_matrix(params, com_pos, rot, foot_pos, contact)
+    if qdd_des is None:
+        state = (com_pos, com_vel, rot, ang_vel)
+        qdd_des = desired_acceleration(
+            params, state, (com_pos_des, com_vel_des, rot_des, ang_vel_des)
+        )
+    g_tilde = jp.array([0.0, 0.0, GRAVITY, 0.0, 0.0, 0.0], jp.float32)
+    wrench_a = jp.concatenate([f_a / params.mass, inertia_w_inv @ tau_a])  # A f_a + B tau_a
     b = qdd_des + g_tilde - wrench_a  # (6,)
 
     MtQ = M.T * params.Q[None, :]  # (12, 6)

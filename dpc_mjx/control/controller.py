@@ -30,6 +30,7 @@ from flax import struct
 
 from dpc_mjx.control import arm_estimate as arm_estimate_lib
 from dpc_mjx.control import balance, gait, qp, sensors, swing
+from dpc_mjx.control import mpc as mpc_lib
 from dpc_mjx.control import observer as observer_lib
 from dpc_mjx.control.arm_model import ArmModel, arm_model
 from dpc_mjx.control.base_scaling import base_scale, scaled_config
@@ -63,6 +64,7 @@ class ControllerConfig:
     arm_estimate: arm_estimate_lib.ArmEstimateConfig = struct.field(
         default_factory=arm_estimate_lib.ArmEstimateConfig
     )  # how the arms' model wrench reads its accelerations
+    mpc: mpc_lib.MPCConfig | None = None  # the low level: None the balance QP, else the MPC's
 
 
 @struct.dataclass
@@ -76,6 +78,7 @@ class ControllerState:
     forces: jax.Array  # (4, 3) last ground reaction forces asked of the stance feet, N
     observer: observer_lib.ObserverState  # the disturbance observer, updated every tick
     arm: arm_estimate_lib.ArmEstimate  # the arms' model wrench, updated every tick
+    mpc: mpc_lib.MPCPlan | None = None  # the MPC's plan (low level 'mpc'; None: 'qp')
 
 
 @struct.dataclass
@@ -115,6 +118,7 @@ class LowLevelController:
             forces=jp.zeros((4, 3)),
             observer=observer_lib.init(self.config.observer, self.config.balance, s),
             arm=arm_estimate_lib.init(s, d.qvel[self.lay.arm_dof]),
+            mpc=None if self.config.mpc is None else mpc_lib.MPCPlan.zeros(self.config.mpc),
         )
 
     def _arm_wrench(
@@ -166,10 +170,10 @@ class LowLevelController:
         pos_des = pos_des.at[:2].set(s.com_pos[:2] + err).at[2].set(cfg.body_height)
         return Plan(s, stance, progress, pos_des, vel_des, yaw_des, command[2])
 
-    def balance_qp(self, p: Plan, u: jax.Array) -> balance.BalanceQP:
-        """The stance-force QP of this tick (eqs. 5-10) with the disturbance u = [f_a, tau_a]."""
+    def balance_qp(self, p: Plan, u: jax.Array, qdd_des=None) -> balance.BalanceQP:
+        """The stance-force QP of this tick (eqs. 5-10) with the disturbance u = [f_a, tau_a],
+        asking for eq. 9's acceleration or `qdd_des` (6,) (the MPC's, `_mpc`)."""
         s = p.state
-        contact_points = s.foot_pos.at[:, 2].add(-self.lay.foot_radius)  # forces act at the ground
         return balance.build_balance_qp(
             self.config.balance,
             s.com_pos,
@@ -177,11 +181,33 @@ class LowLevelController:
             s.rot,
             s.ang_vel,
             *_desired_state(p),
-            contact_points,
+            self._contact_points(s),
             p.stance,
             u[:3],
             u[3:],
+            qdd_des,
         )
+
+    def _contact_points(self, s: BodyState) -> jax.Array:
+        """(4, 3) m, world: where the feet's forces act, on the ground below each foot's centre."""
+        return s.foot_pos.at[:, 2].add(-self.lay.foot_radius)
+
+    def _mpc(self, cs: ControllerState, p: Plan, u, u_ahead, tick):
+        """(the MPC's plan, the QP's target acceleration (6,)) of this tick (`mpc.update`):
+        re-solved where tick % `MPCConfig.every` == 0 (`tick` None: where the plan is that many
+        ticks old or not valid), for the wrench w_0 .. w_{N-1} `u_ahead` (N, 6) (None: u held)."""
+        cfg, plan = self.config.mpc, cs.mpc
+        if tick is None:
+            replan = (cs.t - plan.t0 >= (cfg.every - 0.5) * self.dt) | ~plan.qp.valid
+        else:
+            replan = tick % cfg.every == 0
+        wrench = jp.tile(u, (cfg.steps, 1)) if u_ahead is None else u_ahead
+        desired = (p.pos_des, p.vel_des, p.yaw_des, p.yaw_rate_des)
+        feet = self._contact_points(p.state)
+        return mpc_lib.update(
+            cfg, self.config.balance, self.config.gait, plan, cs.t, p.state, feet, desired,
+            wrench, replan,
+        )  # fmt: skip
 
     def swing_legs(self, cs: ControllerState, p: Plan) -> tuple[jax.Array, jax.Array]:
         """The swing feet of this tick: (4, 3) m, world, each foot's position at its last
@@ -218,6 +244,8 @@ class LowLevelController:
         noise: sensors.SensorNoise | None = None,
         add_estimate: bool | jax.Array = False,
         add_model: bool | jax.Array = False,
+        u_ahead: jax.Array | None = None,
+        tick: int | jax.Array | None = None,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
@@ -228,7 +256,11 @@ class LowLevelController:
         (`arm_estimate`; the `feedforward` controllers, DPC on the model), and with
         `add_estimate` too the observer estimates what the model leaves (the model wrench is
         then among its known wrenches); `noise` the measurement errors of this tick
-        (`control/sensors.py`; None: exact sensors).
+        (`control/sensors.py`; None: exact sensors). With the MPC as the low level
+        (`ControllerConfig.mpc`): `u_ahead` (N, 6) the wrench over its horizon (None: u held);
+        `tick` () int, this tick's index in a sequence the whole batch shares (an env step's
+        ticks), which times the re-solves as a cond that runs one branch (None: the plan's age
+        times them, per env: under vmap both branches run at every tick; `_mpc`).
         Returns the new state and ctrl (nu,): leg torques and arm servo targets."""
         cfg = self.config
         p = self.plan(cs, d, command, noise)
@@ -250,7 +282,10 @@ class LowLevelController:
             u = jp.where(add_estimate, observed.estimate + u, u)
         if add_model is not False:
             u = jp.where(add_model, u + arm.wrench, u)
-        prob = self.balance_qp(p, u)
+        plan, qdd = cs.mpc, None
+        if self.config.mpc is not None:
+            plan, qdd = self._mpc(cs, p, u, u_ahead, tick)
+        prob = self.balance_qp(p, u, qdd)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
         )
@@ -269,7 +304,7 @@ class LowLevelController:
             ctrl = ctrl.at[self.lay.arm_act].set(targets)
         new = ControllerState(
             t=cs.t + self.dt, pos_des=p.pos_des, yaw_des=p.yaw_des, swing_start=swing_start,
-            stance=stance, qp=res, forces=forces, observer=observed, arm=arm,
+            stance=stance, qp=res, forces=forces, observer=observed, arm=arm, mpc=plan,
         )  # fmt: skip
         return new, ctrl
 
@@ -286,10 +321,13 @@ def make_controller(
     gait_: gait.Gait | None = None,
     observer: observer_lib.ObserverConfig | None = None,
     arm_estimate: arm_estimate_lib.ArmEstimateConfig | None = None,
+    low_level: str = "qp",
 ) -> LowLevelController:
     """A controller for a compiled variant. The balance model is the bare base (see module doc);
     the default config is the A1's scaled to the base (`control.base_scaling`); `observer` and
-    `arm_estimate`, if given, replace the config's (gains, delay; the arms' accelerations)."""
+    `arm_estimate`, if given, replace the config's (gains, delay; the arms' accelerations);
+    `low_level` 'qp' (the balance QP alone) or 'mpc' (the MPC's defaults, `control/mpc.py`,
+    R scaled to the base's mass as the QP's; a config that has an MPC keeps it)."""
     lay = layout(model)
     idx = state_index(model, lay)
     scale = base_scale(idx)
@@ -300,6 +338,8 @@ def make_controller(
         config = config.replace(observer=observer)
     if arm_estimate is not None:
         config = config.replace(arm_estimate=arm_estimate)
+    if mpc_lib.low_level(low_level) == "mpc" and config.mpc is None:
+        config = config.replace(mpc=mpc_lib.MPCConfig(R=mpc_lib.MPCConfig.R / scale.mass**2))
     config.observer.validate(float(model.opt.timestep))
     config.arm_estimate.validate()
     arm_home = jp.asarray(model.key_ctrl[0][lay.arm_act], jp.float32)

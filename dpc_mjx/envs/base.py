@@ -107,6 +107,7 @@ class DpcEnv(Env):
             gait_=_GAITS[config.gait](),
             observer=config.observer_config(),
             arm_estimate=config.arm_estimate_config(),
+            low_level=config.low_level,
         )
         self._arm_model = self.controller.arm  # None without an arm
         # on for the controllers that add it, and under u_base 'model' (the data its policy is
@@ -288,17 +289,18 @@ class DpcEnv(Env):
     def _ticks(self, d0: mjx.Data, info: dict, dist: Disturbances, u_policy, tick_keys):
         """`n_substeps` x [controller tick -> physics step] from `d0` (one `lax.scan`; u of each
         tick by `controller_u`): (data, controller state, ctrl queue, the last tick's sensor
-        errors). `tick_keys` (n_substeps, 2) draw the sensor errors (None: exact sensors)."""
+        errors). `tick_keys` (n_substeps, 2) draw the sensor errors (None: exact sensors); the
+        ticks' index i, the same in the whole batch, times the MPC's re-solves (`tick`)."""
         bias, scale = info["sensor_bias"], self.config.sensor_noise
         command = dist.command
 
-        def substep(carry, tick_key):
-            d, cs, queue, _ = carry
+        def substep(carry, xs):
+            (d, cs, queue, _), (i, tick_key) = carry, xs
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
             u, add, model = self.controller_u(d, u_policy, info.get("controller"))
             targets = self.arm_targets(dist, d.time, d)
             cs, ctrl = self.controller.step(
-                cs, d, command, u, targets, noise, add_estimate=add, add_model=model
+                cs, d, command, u, targets, noise, add_estimate=add, add_model=model, tick=i
             )
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
@@ -310,7 +312,8 @@ class DpcEnv(Env):
             return (d, cs, queue, bias if noise is None else noise), None
 
         carry = (d0, info["ctrl"], info["ctrl_queue"], bias)
-        (d, cs, queue, noise), _ = jax.lax.scan(substep, carry, tick_keys, length=self.n_substeps)
+        xs = (jp.arange(self.n_substeps), tick_keys)
+        (d, cs, queue, noise), _ = jax.lax.scan(substep, carry, xs, length=self.n_substeps)
         return d, cs, queue, noise
 
     # the disturbance u -----------------------------------------------------------------------

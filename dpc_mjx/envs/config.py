@@ -17,12 +17,23 @@ keyword, a `--set env.NAME` / `--env NAME` key, the export sidecar's `env_config
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Any
 
 from dpc_mjx.control.arm_estimate import BASE_ACC_SOURCES, QDD_SOURCES, ArmEstimateConfig
+from dpc_mjx.control.mpc import LOW_LEVELS
 from dpc_mjx.control.observer import ObserverConfig
 from dpc_mjx.controllers import Controller
+from dpc_mjx.envs.checks import (
+    check_axes,
+    check_bool,
+    check_choice,
+    check_int,
+    check_number,
+    check_number_or_pair,
+    check_positive,
+    check_range,
+    per_axis,
+)
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import ENGINE_CHOICES
 
@@ -84,6 +95,9 @@ class EnvConfig:
     gait: str = "trot"  # 'trot' or 'stand'
     policy_dt: float = 0.02  # s, one env step (50 Hz); a multiple of the physics step (0.004 s)
     episode_length: int = 1000  # env steps per episode (20 s) for `wrap_for_training`
+    # The low level under every controller: 'qp' (the one-tick balance QP, `control/balance.py`)
+    # or 'mpc' (the convex MPC over a horizon, the QP tracking its plan: `control/mpc.py`)
+    low_level: str = "qp"
     # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device), 'native' (MuJoCo C on
     # the same model, on the host: the faster path on a CPU, and sim-to-sim) or 'auto' (native
     # on one CPU device, MJX on an accelerator: `physics.resolve_engine`); a built env's
@@ -221,7 +235,7 @@ class EnvConfig:
     @property
     def u_scale(self) -> tuple[float, ...]:
         """(6,) N, N, N, N·m, N·m, N·m: u = u_scale * a for an action a in [-1, 1]^6."""
-        return _per_axis(self.max_force) + _per_axis(self.max_torque)
+        return per_axis(self.max_force) + per_axis(self.max_torque)
 
     def observer_config(self) -> ObserverConfig:
         """The disturbance observer these fields configure (gains; delay if aligned)."""
@@ -263,31 +277,32 @@ class EnvConfig:
     def validate(self) -> None:
         """Raise `DpcError` naming the first invalid field and what it must be."""
         Controller.parse(self.controller)
-        _choice("gait", self.gait, GAITS)
-        _choice("engine", self.engine, ENGINE_CHOICES)
+        check_choice("gait", self.gait, GAITS)
+        check_choice("engine", self.engine, ENGINE_CHOICES)
+        check_choice("low_level", self.low_level, LOW_LEVELS)
         _policy_u(self.u_frame, self.u_base)
         if not isinstance(self.base, str) or not self.base:
             raise DpcError(
                 f"base={self.base!r}: give a base's name (a1, go1, go2, b1, b1-z1) or the path "
                 "of its .urdf, MJCF .xml or .json file."
             )
-        _number("sensor_noise", self.sensor_noise, 0.0, 10.0)
-        _int("sensor_delay", self.sensor_delay, 0, 10)
+        check_number("sensor_noise", self.sensor_noise, 0.0, 10.0)
+        check_int("sensor_delay", self.sensor_delay, 0, 10)
         check_number_or_pair("observer_gain", self.observer_gain, 1.0, 200.0)
-        _bool("observer_aligned", self.observer_aligned)
-        _choice("arm_qdd", self.arm_qdd, QDD_SOURCES)
-        _choice("arm_base_acc", self.arm_base_acc, BASE_ACC_SOURCES)
-        _number("arm_filter_s", self.arm_filter_s, 0.0, 1.0)
+        check_bool("observer_aligned", self.observer_aligned)
+        check_choice("arm_qdd", self.arm_qdd, QDD_SOURCES)
+        check_choice("arm_base_acc", self.arm_base_acc, BASE_ACC_SOURCES)
+        check_number("arm_filter_s", self.arm_filter_s, 0.0, 1.0)
         for name in ("max_force", "max_torque"):
-            _axes(name, getattr(self, name))
+            check_axes(name, getattr(self, name))
         for name in ("policy_dt", "explode_speed", "reach_move_time"):
-            _positive(name, getattr(self, name))
-        _int("episode_length", self.episode_length, 1)
-        _number("fall_penalty", self.fall_penalty)
-        _number("joint_noise", self.joint_noise, low=0.0)
-        _number("reach_fraction", self.reach_fraction, low=0.0, high=1.0)
+            check_positive(name, getattr(self, name))
+        check_int("episode_length", self.episode_length, 1)
+        check_number("fall_penalty", self.fall_penalty)
+        check_number("joint_noise", self.joint_noise, low=0.0)
+        check_number("reach_fraction", self.reach_fraction, low=0.0, high=1.0)
         for name in ("command_vx", "command_vy", "command_yaw"):
-            _range(name, getattr(self, name))
+            check_range(name, getattr(self, name))
         if self.command_after is not None:
             if not (isinstance(self.command_after, tuple) and len(self.command_after) == 3):
                 raise DpcError(
@@ -295,16 +310,16 @@ class EnvConfig:
                     f"got {self.command_after!r}."
                 )
             for v in self.command_after:
-                _number("command_after", v)
+                check_number("command_after", v)
         for name in ("command_switch", "push_force", "push_gap", "payload_mass", "object_mass"):
-            _range(name, getattr(self, name), low=0.0)
+            check_range(name, getattr(self, name), low=0.0)
         for name in ("reach_period", "push_duration", "script_rate"):
-            _range(name, getattr(self, name), low=1e-3)
+            check_range(name, getattr(self, name), low=1e-3)
         w = self.push_axis_weights
         if not (isinstance(w, tuple) and len(w) == 3):
             raise DpcError(f"push_axis_weights must be an (x, y, z) tuple, got {w!r}.")
         for v in w:
-            _number("push_axis_weights", v, low=0.0)
+            check_number("push_axis_weights", v, low=0.0)
         if not any(v > 0 for v in w):
             raise DpcError("push_axis_weights must have at least one weight > 0.")
 
@@ -331,67 +346,10 @@ def _flat(overrides: dict) -> dict:
 
 def _policy_u(u_frame: Any, u_base: Any) -> None:
     """`DpcError` unless the frame and base of the policy's u are known and fit together."""
-    _choice("u_frame", u_frame, U_FRAMES)
-    _choice("u_base", u_base, U_BASES)
+    check_choice("u_frame", u_frame, U_FRAMES)
+    check_choice("u_base", u_base, U_BASES)
     if u_base == "observer" and u_frame != "yaw":
         raise DpcError(
             "u_base='observer' adds the policy's u to u_obs, a yaw-frame estimate: set "
             "u_frame='yaw' (the default) with it."
         )
-
-
-def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise DpcError(f"{name}={value!r} is not valid; choose one of {list(choices)}.")
-
-
-def _int(name: str, value: Any, low: int, high: float = math.inf) -> None:
-    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
-        raise DpcError(f"{name} must be an int in [{low}, {high}], got {value!r}.")
-
-
-def check_number_or_pair(name: str, value: Any, low: float, high: float) -> None:
-    """`DpcError` unless `value` is a number in [low, high], or a (force, torque) pair of them."""
-    if isinstance(value, tuple) and len(value) != 2:
-        raise DpcError(f"{name} must be a number or a (force, torque) pair, got {value!r}.")
-    for v in value if isinstance(value, tuple) else (value,):
-        _number(name, v, low, high)
-
-
-def _bool(name: str, value: Any) -> None:
-    if not isinstance(value, bool):
-        raise DpcError(f"{name} must be True or False, got {value!r}.")
-
-
-def _number(name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or not low <= value <= high:
-        raise DpcError(f"{name} must be a finite number in [{low}, {high}], got {value!r}.")
-
-
-def _positive(name: str, value: Any) -> None:
-    _number(name, value)
-    if value <= 0:
-        raise DpcError(f"{name} must be > 0, got {value!r}.")
-
-
-def _per_axis(value: float | tuple[float, ...]) -> tuple[float, float, float]:
-    return tuple(float(v) for v in value) if isinstance(value, tuple) else (float(value),) * 3
-
-
-def _axes(name: str, value: Any) -> None:
-    """A positive number, or an (x, y, z) tuple of them."""
-    values = value if isinstance(value, tuple) else (value,)
-    if isinstance(value, tuple) and len(value) != 3:
-        raise DpcError(f"{name} must be a number or an (x, y, z) tuple, got {value!r}.")
-    for v in values:
-        _positive(name, v)
-
-
-def _range(name: str, value: Any, low: float = -math.inf) -> None:
-    if not (isinstance(value, tuple) and len(value) == 2):
-        raise DpcError(f"{name} must be a (low, high) tuple, got {value!r}.")
-    for v in value:
-        _number(name, v, low=low)
-    if value[0] > value[1]:
-        raise DpcError(f"{name} must have low <= high, got {value!r}.")

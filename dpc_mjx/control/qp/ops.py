@@ -101,7 +101,61 @@ def _take(x: jax.Array, idx: np.ndarray) -> jax.Array:
     return x[idx]
 
 
-def _cholesky(columns: list[jax.Array], floor: float) -> list[tuple[jax.Array, jax.Array]]:
+# Above this many variables the factor is dense and batch-major (`_DenseFactor`): the unrolled
+# Cholesky emits ~n^2 ops per factor and ~n^2 per solve, and XLA took over 4 minutes (not
+# finished) to compile a batch of the MPC's QPs (n = 120: 10 steps x 12 forces, `control/mpc.py`)
+# with it, against 10 s dense; LAPACK's potrf and two triangular solves take ~4 ms for a
+# (64, 120, 120) batch on one core. The balance QP (n = 12) keeps the unrolled factor.
+_UNROLL_MAX = 32
+
+
+def _cholesky(columns: list[jax.Array], floor: float):
+    """The factor of H = L L' from the columns H[j:, j] (n - j, ...): unrolled
+    (`_cholesky_unrolled`) up to `_UNROLL_MAX` variables, else dense (`_DenseFactor`)."""
+    if len(columns) > _UNROLL_MAX:
+        return _DenseFactor.of(columns, floor)
+    return _cholesky_unrolled(columns, floor)
+
+
+@jax.tree_util.register_pytree_node_class
+class _DenseFactor:
+    """L (..., n, n), lower, batch-major: H + floor diag(H) = L L' for a problem of many
+    variables. The floor on the diagonal stands in for the unrolled factor's pivot floor (it
+    changes the Newton direction's matrix, not the problem: the residuals are exact)."""
+
+    def __init__(self, L: jax.Array):
+        self.L = L
+
+    def tree_flatten(self):
+        return (self.L,), None
+
+    @classmethod
+    def tree_unflatten(cls, _, children):
+        return cls(*children)
+
+    @classmethod
+    def of(cls, columns: list[jax.Array], floor: float) -> _DenseFactor:
+        n = len(columns)
+        pad = [
+            jp.concatenate([jp.zeros((j,) + c.shape[1:], c.dtype), c])
+            for j, c in enumerate(columns)
+        ]
+        lower_t = jp.stack(pad)  # (n, n, ...): [j, i] = H[i, j] for i >= j, 0 above
+        H = jp.moveaxis(lower_t, (0, 1), (-1, -2))  # (..., n, n), lower triangle of H
+        diag = jp.diagonal(H, axis1=-2, axis2=-1)  # (..., n)
+        H = H + (floor * diag + _TINY)[..., None] * jp.eye(n, dtype=H.dtype)
+        return cls(jax.lax.linalg.cholesky(H, symmetrize_input=False))
+
+    def solve(self, b: jax.Array) -> jax.Array:
+        """x (n, ...) of L L' x = b for b (n, ...)."""
+        rhs = jp.moveaxis(b, 0, -1)[..., None]  # (..., n, 1)
+        solve = jax.lax.linalg.triangular_solve
+        y = solve(self.L, rhs, left_side=True, lower=True)
+        x = solve(self.L, y, left_side=True, lower=True, transpose_a=True)
+        return jp.moveaxis(x[..., 0], -1, 0)
+
+
+def _cholesky_unrolled(columns: list[jax.Array], floor: float) -> list[tuple[jax.Array, jax.Array]]:
     """Unrolled right-looking Cholesky H = L L' from the columns H[j:, j] (n - j, ...).
 
     Returns the columns of L as (L_jj (...), L[j+1:, j] (n-j-1, ...)). A pivot below
@@ -124,8 +178,10 @@ def _cholesky(columns: list[jax.Array], floor: float) -> list[tuple[jax.Array, j
     return out
 
 
-def _cho_solve(chol: list[tuple[jax.Array, jax.Array]], b: jax.Array) -> jax.Array:
-    """Solve L L' x = b for b (n, ...), with L given column-wise by `_cholesky`."""
+def _cho_solve(chol, b: jax.Array) -> jax.Array:
+    """Solve L L' x = b for b (n, ...), with L from `_cholesky` (column-wise or dense)."""
+    if isinstance(chol, _DenseFactor):
+        return chol.solve(b)
     n = len(chol)
     y, r = [], b
     for j in range(n):  # forward: L y = b, column-oriented

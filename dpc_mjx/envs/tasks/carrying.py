@@ -51,7 +51,8 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.envs.base import DpcEnv
-from dpc_mjx.envs.config import EnvConfig, _number, _positive
+from dpc_mjx.envs.checks import check_number, check_positive
+from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import NEVER
 from dpc_mjx.envs.tasks import scripts
 from dpc_mjx.errors import DpcError
@@ -91,11 +92,11 @@ class CarryingConfig(EnvConfig):
 
     def validate(self) -> None:
         super().validate()
-        _number("robot_x", self.robot_x, low=-0.5, high=0.3)
-        _number("start_time", self.start_time, low=0.0)
-        _number("hold_time", self.hold_time, low=0.0)
+        check_number("robot_x", self.robot_x, low=-0.5, high=0.3)
+        check_number("start_time", self.start_time, low=0.0)
+        check_number("hold_time", self.hold_time, low=0.0)
         for name in ("grasp_threshold", "move_time"):
-            _positive(name, getattr(self, name))
+            check_positive(name, getattr(self, name))
 
 
 def default_config() -> CarryingConfig:

@@ -36,7 +36,8 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.envs.base import DpcEnv
-from dpc_mjx.envs.config import EnvConfig, _number, _positive, _range
+from dpc_mjx.envs.checks import check_number, check_positive, check_range
+from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import scripts
 from dpc_mjx.envs.tasks.carrying import FINGER_CLOSED
 from dpc_mjx.errors import DpcError
@@ -59,9 +60,9 @@ class LiftingConfig(EnvConfig):
 
     def validate(self) -> None:
         super().validate()
-        _positive("move_time", self.move_time)
-        _number("hold_time", self.hold_time, low=0.0)
-        _range("lift_gain", self.lift_gain, low=0.0)
+        check_positive("move_time", self.move_time)
+        check_number("hold_time", self.hold_time, low=0.0)
+        check_range("lift_gain", self.lift_gain, low=0.0)
         if self.lift_gain[1] > 1.5:
             raise DpcError(f"lift_gain must stay <= 1.5 (joint ranges), got {self.lift_gain!r}.")
 

@@ -46,7 +46,8 @@ import mujoco
 import numpy as np
 
 from dpc_mjx.envs.base import DpcEnv
-from dpc_mjx.envs.config import EnvConfig, _number, _positive
+from dpc_mjx.envs.checks import check_number, check_positive
+from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.tasks import scripts
 from dpc_mjx.errors import DpcError
 from dpc_mjx.robots import objects
@@ -75,12 +76,12 @@ class PushingConfig(EnvConfig):
 
     def validate(self) -> None:
         super().validate()
-        _number("push_target", self.push_target)
-        _positive("arm_move_time", self.arm_move_time)
+        check_number("push_target", self.push_target)
+        check_positive("arm_move_time", self.arm_move_time)
         if not (isinstance(self.box_jitter, tuple) and len(self.box_jitter) == 3):
             raise DpcError(f"box_jitter must be an (x, y, heading) tuple, got {self.box_jitter!r}.")
         for v, high in zip(self.box_jitter, (0.1, 0.05, 0.5), strict=True):
-            _number("box_jitter", v, low=0.0, high=high)  # the plate still meets the box
+            check_number("box_jitter", v, low=0.0, high=high)  # the plate still meets the box
 
 
 def default_config() -> PushingConfig:
