@@ -11,7 +11,7 @@ step before an episode's end, in the yaw frame (torques about the base's COM), e
 against the oracle's u (the measured mount wrench, privileged):
 
     exact inputs      `arm_model.model_wrench` on the simulator's own state and accelerations
-                      (`arm_model.exact_inputs` after `mjx.forward`; privileged), against the
+                      (`adapter.data.exact_wrenches`: after `mjx.forward`; privileged), against the
                       oracle of that same forward pass: the model alone
     the others        what the `feedforward` controller computes at its last tick from measured
                       inputs (`EnvConfig.sensor_noise`, the defaults), qdd from the arms' servo
@@ -33,13 +33,10 @@ from __future__ import annotations
 import argparse
 
 import jax
-import jax.numpy as jp
 import numpy as np
-from mujoco import mjx
 
 from dpc_mjx import stats
-from dpc_mjx.control.arm_model import exact_inputs, model_wrench
-from dpc_mjx.control.controller import oracle_u
+from dpc_mjx.adapter.data import exact_wrenches
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_yaw_frame
@@ -61,16 +58,6 @@ SOURCES = {  # row -> env options over FREE
 }
 
 
-def exact_pair(env, d) -> tuple[jax.Array, jax.Array]:
-    """(model wrench from exact inputs, oracle u) of one env's data, both of one forward pass."""
-    d = mjx.forward(env.mx, d)
-    offset = jp.asarray(env.controller.idx.com_offset, jp.float32)
-    gravity = jp.asarray(env.model.opt.gravity, jp.float32)
-    base, (q, qd, qdd) = exact_inputs(env.lay, offset, gravity, d)
-    oracle = oracle_u(env.lay, d, d.xpos[env.lay.trunk] + base.com)
-    return model_wrench(env.controller.arm, base, q, qd, qdd), oracle
-
-
 def rollouts(arm: str, options: dict, args, exact: bool = False) -> dict:
     """Per-step records (steps, episodes, ...) on `arm` with env `options` over FREE."""
     env = make(DEFAULT_TASK, arm=arm, controller=args.controller, engine=args.engine, **options)
@@ -86,7 +73,7 @@ def rollouts(arm: str, options: dict, args, exact: bool = False) -> dict:
             "done": after.done,
         }
         if exact:
-            out["exact"], out["exact_oracle"] = jax.vmap(lambda x: exact_pair(env, x))(d)
+            out["exact"], out["exact_oracle"] = jax.vmap(lambda x: exact_wrenches(env, x))(d)
         return out
 
     carry, key = rollout.start(env, args.episodes, args.seed)

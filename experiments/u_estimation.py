@@ -14,7 +14,10 @@ y left, z up; torques about the base's COM):
     observer   the disturbance observer's estimate u_obs (what the `observer` controller uses)
     gravity    the arms' weight and its torque at their pose (`DpcEnv.arm_gravity`; what DPC
                with `u_base` 'gravity' adds its policy's u to)
-    dpc        the export's u: u_scale * pi(obs), plus u_obs or u_gravity by its base
+    feedforward   the arms' model wrench from measured inputs (`control/arm_estimate.py`; the
+               `feedforward` controller's u, what DPC with `u_base` 'model' adds its u to)
+    dpc        the export's u: u_scale * pi(obs), plus u_obs, u_gravity or the model wrench by
+               its base
     other      `--other`'s u on the same observations (e.g. another recipe's export; named
                `--other-label`)
     other, own loop   `--other`'s u on rollouts under its own control (same seeds; with
@@ -55,6 +58,7 @@ def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
     artefacts = io.load(export)
     options = env_overrides(artefacts) | {"engine": args.engine}
     env = make(DEFAULT_TASK, arm=args.arm, controller=args.controller, **options)
+    env.use_arm_model(True)  # the feedforward's estimate, whoever controls
     policy = artefacts.dpc_policy(args.arm)
 
     def record(before, after):
@@ -65,6 +69,7 @@ def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
             "yaw": yaw,
             "u_oracle": privileged[:, PRIVILEGED["u_oracle"]],
             "u_gravity": jax.vmap(env.arm_gravity)(before.pipeline_state),  # (B, 6) world
+            "u_model": before.info["ctrl"].arm.wrench,  # (B, 6) world, the last tick's
             "push": privileged[:, PRIVILEGED["ee_force"]],
             "done": after.done,
         }
@@ -79,12 +84,13 @@ def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
     out["alive"] = done_before == 0
     out["u_scale"] = np.asarray(env.config.u_scale)
     out["gravity"] = np.asarray(wrench_to_yaw_frame(out["u_gravity"], out["yaw"]))
+    out["model"] = np.asarray(wrench_to_yaw_frame(out["u_model"], out["yaw"]))
     return out
 
 
 def estimates(rec: dict, export: pathlib.Path, arm: str) -> np.ndarray:
     """(steps, episodes, 6) the export's u on the recorded observations, yaw frame: its
-    policy's u_scale * a, plus u_obs or the arms' gravity wrench by its `u_base`."""
+    policy's u_scale * a, plus u_obs, the arms' gravity or model wrench by its `u_base`."""
     artefacts = io.load(export)
     options = env_overrides(artefacts)
     scale = np.asarray(make(DEFAULT_TASK, arm=arm, **options).config.u_scale)
@@ -93,6 +99,7 @@ def estimates(rec: dict, export: pathlib.Path, arm: str) -> np.ndarray:
     if options["u_frame"] != "yaw":
         u = np.asarray(wrench_to_yaw_frame(u, rec["yaw"]))
     base = {"observer": rec["obs"][..., -U_OBS_SIZE:], "gravity": rec["gravity"]}
+    base["model"] = rec["model"]
     return u + base.get(options.get("u_base", "zero"), 0.0)
 
 
@@ -174,7 +181,7 @@ def main() -> None:
     rec = rollouts(pathlib.Path(args.export), args)
     truth = np.asarray(wrench_to_yaw_frame(rec["u_oracle"], rec["yaw"]))
     u_obs = rec["obs"][..., -U_OBS_SIZE:]  # the observation's last entries
-    series = {"observer": u_obs, "gravity": rec["gravity"]}
+    series = {"observer": u_obs, "gravity": rec["gravity"], "feedforward": rec["model"]}
     series["dpc"] = estimates(rec, args.export, args.arm)
     rows = {}
     if args.other:

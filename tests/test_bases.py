@@ -155,7 +155,8 @@ def test_the_shipped_export_of_a_base_is_its_own(base, arm):
     scaled = get_config("reaching", base=base)  # trained with the base's weight-scaled bounds
     np.testing.assert_allclose(artefacts.meta["action_scaling"]["u_scale"], scaled.u_scale)
     runner = NumpyPolicy(export, arm)  # the numpy runner: a finite u within its bounds
-    u = runner.u(np.zeros(runner.input_size, np.float32))
+    assert runner.base == "model"  # added to the arms' model wrench (here 0)
+    u = runner.u(np.zeros(runner.input_size, np.float32), u_model=np.zeros(6))
     assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= np.asarray(scaled.u_scale) + 1e-6)
 
 

@@ -10,7 +10,7 @@ from dpc_mjx.controllers import ALIASES, Controller
 from dpc_mjx.envs import CONTROLLERS as ENV_CONTROLLERS
 from dpc_mjx.envs import DEFAULT_TASK, EnvConfig, get_config
 from dpc_mjx.io.load import load
-from dpc_mjx.io.shipped import SHIPPED, env_overrides
+from dpc_mjx.io.shipped import SHIPPED_PAPER, env_overrides
 from dpc_mjx.run import cli
 from dpc_mjx.run.config import RunConfig
 from dpc_mjx.run.eval import CONTROLLERS as EVAL_CONTROLLERS
@@ -81,7 +81,7 @@ def test_env_config_reads_policy_as_dpc_and_old_sidecars_still_load():
     assert get_config(DEFAULT_TASK, controller="mbc").controller is Controller.MBC
     with pytest.raises(DpcError, match="Unknown controller 'pid'"):
         get_config(DEFAULT_TASK, controller="pid")
-    art = load(SHIPPED)
+    art = load(SHIPPED_PAPER)
     assert art.meta["env_config"]["controller"] == "policy"  # written before the enum
     assert "controller" not in env_overrides(art)  # chosen per use, as before
     get_config(DEFAULT_TASK, **art.meta["env_config"])  # and still a valid env config

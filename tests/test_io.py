@@ -504,7 +504,8 @@ mod = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(mod)
 for folder in ({str(exported)!r}, {str(SHIPPED)!r}):
     policy = mod.NumpyPolicy(folder, "regular")
-    assert policy.u(np.zeros(32), 0.5).shape == (6,)  # [s_body, s_arm, p_arm, u_obs], yaw
+    given = {{"u_model": np.zeros(6)}} if policy.base == "model" else {{}}  # the shipped: model
+    assert policy.u(np.zeros(32), 0.5, **given).shape == (6,)  # [s_body, s_arm, p_arm, u_obs]
 assert "jax" not in sys.modules
 loaded = [m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib", "flax", "dpc_mjx")]
 assert not loaded, loaded
@@ -720,7 +721,10 @@ def test_shipped_export_records_its_layout_and_old_sidecars_still_load(shipped_c
     a, a_old = art.dpc_policy("regular")(obs, None), old.dpc_policy("regular")(obs, None)
     np.testing.assert_array_equal(np.asarray(a), np.asarray(a_old))
     yaw = np.linspace(-1.0, 1.0, len(obs))
-    np.testing.assert_array_equal(old_numpy.u(obs, yaw), numpy_policy.u(obs, yaw))
+    u_model = np.tile(np.arange(6.0), (len(obs), 1))  # N, N·m: the shipped export's base
+    np.testing.assert_array_equal(
+        old_numpy.u(obs, yaw, u_model=u_model), numpy_policy.u(obs, yaw, u_model=u_model)
+    )
     assert old_numpy.s_body == slice(0, 11)
 
 

@@ -48,6 +48,13 @@ SEED, EPISODES, STEPS, EVERY = 31, 4, 80, 10  # the recording's episodes
 README_ONNX = "ort.InferenceSession("  # the README's onnxruntime snippet holds this
 
 
+def graph_u(policy: NumpyPolicy, obs: np.ndarray) -> np.ndarray:
+    """What the graph gives: `policy.u(obs)`, with a zero wrench where the robot adds its own
+    (action_scaling.base 'gravity' or 'model': the shipped exports' 'model')."""
+    given = {f"u_{policy.base}": np.zeros(6)} if policy.base in ("gravity", "model") else {}
+    return policy.u(obs, **given)
+
+
 def _observations() -> dict[str, np.ndarray]:
     with np.load(DATA) as data:  # no pickle (np.load's default)
         return {key: data[key] for key in CELLS}
@@ -90,7 +97,7 @@ def test_graph_matches_numpy_policy(sessions, key):
     assert (inp.name, out.name) == (names["input"], names["output"])
     assert inp.shape == ["batch", policy.input_size + 6] and out.shape == ["batch", 6]
     (u,) = session.run(None, {inp.name: obs})
-    expected = policy.u(obs)  # the policy's frame ('yaw' for the shipped export)
+    expected = graph_u(policy, obs)  # the policy's frame ('yaw' for the shipped export)
     assert u.dtype == np.float32 and u.shape == expected.shape == (32, 6)
     err = np.abs(u - expected) / np.maximum(1.0, np.abs(expected))
     assert err.max() <= TOL, f"{key}: max |du| / max(1, |u|) = {err.max():.2e}"
@@ -211,7 +218,7 @@ def test_cli_writes_a_graph_with_a_dynamic_batch_axis(tmp_path, capsys):
     for batch in (1, 7):
         (u,) = session.run(None, {"obs": obs[:batch]})
         assert u.shape == (batch, 6)
-        np.testing.assert_allclose(u, policy.u(obs[:batch]), rtol=TOL, atol=TOL)
+        np.testing.assert_allclose(u, graph_u(policy, obs[:batch]), rtol=TOL, atol=TOL)
 
 
 def test_readme_snippet_runs(tmp_path, monkeypatch):
@@ -225,7 +232,7 @@ def test_readme_snippet_runs(tmp_path, monkeypatch):
     assert cli.main(["onnx", "--arm", "regular", "--out", "policy.onnx"]) == 0
     namespace: dict = {}
     exec(compile(code, "README.md (onnx)", "exec"), namespace)  # noqa: S102 (our README)
-    expected = NumpyPolicy(SHIPPED, "regular").u(namespace["obs"])
+    expected = graph_u(NumpyPolicy(SHIPPED, "regular"), namespace["obs"])
     np.testing.assert_allclose(namespace["u"], expected, rtol=TOL, atol=TOL)
 
 

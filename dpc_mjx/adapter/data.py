@@ -7,8 +7,9 @@ pushes and payloads (the env's `EnvConfig` distributions), with the env's low-le
 For the adapter the env should be built with `controller="mbc"` (u = 0), so the data show the
 arm's effect on the body the policy will later correct; `collect` warns of nothing and takes any
 env whose observation is `[s_body, s_arm, p_arm, u_obs]`. Each row also keeps, for the policy's
-regression (`policy.regression`), the observer's estimate u_obs, the oracle's u (privileged) and the
-heading (to turn u into the yaw frame).
+regression (`policy.regression`), the observer's estimate u_obs, the oracle's u (privileged), the
+arms' gravity wrench, what the arms' model cannot know (`unmodelled_u`: privileged, one extra
+forward pass per env step) and the heading (to turn u into the yaw frame).
 
 s_drp = (roll rate, pitch rate): the trunk's angular velocity about its own x and y axes (rad/s,
 trunk frame, what an IMU's gyro reads), i.e. s_body[2:4] one env step (20 ms) later.
@@ -26,9 +27,13 @@ import pathlib
 import time
 
 import jax
+import jax.numpy as jp
 import numpy as np
+from mujoco import mjx
 
 from dpc_mjx import devices
+from dpc_mjx.control.arm_model import exact_inputs, model_wrench
+from dpc_mjx.control.controller import oracle_u
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
@@ -49,7 +54,7 @@ _ROWS = (
     "u_obs",
     "yaw",
     "u_gravity",
-    "u_model",
+    "u_unmodelled",
 )
 
 
@@ -70,9 +75,11 @@ class Dataset:
     yaw: np.ndarray | None = None  # (N,) rad, the trunk's heading at t (world frame <-> yaw frame)
     # (N, 6) the arms' gravity wrench at t from their file's masses (`DpcEnv.arm_gravity`), world
     u_gravity: np.ndarray | None = None
-    # (N, 6) the arms' model wrench at t (their inverse dynamics from the measured states, the
-    # controller's last tick: `control/arm_estimate.py`), world
-    u_model: np.ndarray | None = None
+    # (N, 6) privileged: what the arms' model cannot know at t (the pushes and the payload as the
+    # mount feels them, and model error), the measured mount wrench minus the arms' model
+    # wrench on the simulator's exact state and accelerations, both of one forward pass
+    # (`unmodelled_u`), world
+    u_unmodelled: np.ndarray | None = None
     env_steps: int = 0  # env steps run to collect them (kept + dropped)
     seconds: float = 0.0  # wall time of the collection
 
@@ -107,9 +114,10 @@ class Dataset:
         """(N, 6) the arms' gravity wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
         return self._world_wrench_in("u_gravity", frame)
 
-    def u_model_in(self, frame: str) -> np.ndarray:
-        """(N, 6) the arms' model wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
-        return self._world_wrench_in("u_model", frame)
+    def u_unmodelled_in(self, frame: str) -> np.ndarray:
+        """(N, 6) what the arms' model cannot know in `frame` ('world', or 'yaw': turned by
+        `yaw`)."""
+        return self._world_wrench_in("u_unmodelled", frame)
 
     def _world_wrench_in(self, name: str, frame: str) -> np.ndarray:
         """(N, 6) the world-frame wrench column `name` in `frame` ('world' or 'yaw')."""
@@ -218,6 +226,27 @@ class Dataset:
         return self.take(slice(0, len(self) - n_val)), self.take(slice(len(self) - n_val, None))
 
 
+def exact_wrenches(env: DpcEnv, d) -> tuple[jax.Array, jax.Array]:
+    """(the arms' model wrench on the exact state and accelerations, the oracle's u) of one env's
+    data `d`, both (6,) N and N·m about the base's COM, world, from one `mjx.forward` of `d`
+    (privileged: `arm_model.exact_inputs`). Zeros for a base without arms."""
+    if env.arm_model is None:
+        return jp.zeros(6), jp.zeros(6)
+    d = mjx.forward(env.mx, d)
+    offset = jp.asarray(env.controller.idx.com_offset, jp.float32)  # trunk frame, m
+    gravity = jp.asarray(env.model.opt.gravity, jp.float32)
+    base, (q, qd, qdd) = exact_inputs(env.lay, offset, gravity, d)
+    oracle = oracle_u(env.lay, d, d.xpos[env.lay.trunk] + base.com)
+    return model_wrench(env.arm_model, base, q, qd, qdd), oracle
+
+
+def unmodelled_u(env: DpcEnv, d) -> jax.Array:
+    """(6,) what the arms' model cannot know in one env's data `d`: the oracle's u minus the
+    model wrench on the exact state, one forward pass (`exact_wrenches`; privileged), world."""
+    model, oracle = exact_wrenches(env, d)
+    return oracle - model
+
+
 def _staggered(state, episode_length: int, burn_in: int, seed: int):
     """`state` (a `wrap_for_training` batch just reset) with env i's episode step counter set so
     that its first episode ends after k_i ~ U{1 .. min(burn_in, episode_length)} steps."""
@@ -257,11 +286,11 @@ def collect(
     def record(before, after):  # the obs, its oracle u, heading and the next roll/pitch rates
         u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
         u_gravity = jax.vmap(env.unwrapped.arm_gravity)(before.pipeline_state)  # (B, 6) world
-        u_model = before.info["ctrl"].arm.wrench  # (B, 6) world, the last tick's
+        u_unmodelled = jax.vmap(lambda d: unmodelled_u(env.unwrapped, d))(before.pipeline_state)
         yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
         keep = after.done == 0.0  # the next obs is a successor of obs
         drp = after.obs[:, layout.s_body][:, DRP]
-        return before.obs, u_oracle, yaw, drp, keep, u_gravity, u_model
+        return before.obs, u_oracle, yaw, drp, keep, u_gravity, u_unmodelled
 
     t0 = time.perf_counter()
     key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the policy
@@ -292,7 +321,7 @@ def collect(
             if kept >= samples:
                 break
     columns = (np.concatenate([p[k] for p in parts])[:samples] for k in range(len(parts[0])))
-    obs, drp, env_id, u_oracle, yaw, u_gravity, u_model = columns  # float32 but env_id (int32)
+    obs, drp, env_id, u_oracle, yaw, u_gravity, u_unmodelled = columns  # float32 but env_id (int32)
     return Dataset(
         s_body=obs[:, layout.s_body],
         s_arm=obs[:, layout.s_arm],
@@ -303,7 +332,7 @@ def collect(
         u_obs=obs[:, layout.u_obs],
         yaw=yaw,
         u_gravity=u_gravity,
-        u_model=u_model,
+        u_unmodelled=u_unmodelled,
         env_steps=steps,
         seconds=time.perf_counter() - t0,
     )

@@ -34,18 +34,20 @@ predict; it stays near p, so float32 does not lose the sum over a long episode).
 the wrench of the forces commanded at tick j, which act over [t_j, t_j + dt], with the lever
 arms read at tick j + 1 (MJX data after a step hold the kinematics the step integrated from). In
 continuous time r obeys dr/dt = K (F_ext - r): r is F_ext through a first-order low-pass of
-bandwidth K, time constant 1/K (50 ms at the default 20 rad/s; 95 % of a step after
-3/K = 0.15 s, 99 % after 5/K = 0.25 s), with no differentiation of a velocity. The discrete
-filter has the pole 1 - K dt (0.92 at the default): a monotone lag for K dt < 1, i.e.
+bandwidth K, time constant 1/K (25 ms at the default 40 rad/s; 95 % of a step after
+3/K = 75 ms, 99 % after 5/K = 0.125 s), with no differentiation of a velocity. The discrete
+filter has the pole 1 - K dt (0.84 at the default): a monotone lag for K dt < 1, i.e.
 K < 250 rad/s at the 4 ms tick.
 
-Gain (`ObserverConfig`, default 20 rad/s on every axis). The arm's wrench is slow (a reaching
+Gain (`ObserverConfig`, default 40 rad/s on every axis). The arm's wrench is slow (a reaching
 move lasts ~1 s, a push 0.2-1 s); what is not the arm is fast (touch-down and lift-off of the
 trot, every 0.15 s, swing-leg reactions) and passes into r in proportion to K: on the bare A1
 trotting at 0.3 m/s the estimate's ripple (std of f_z) measured 4.6, 11, 21, 34 N at K = 10,
-25, 50, 100 rad/s, while its mean did not change. 20 rad/s keeps the lag (50 ms, 12.5 ticks, so
-the discrete filter is close to its continuous lag) a twentieth of a reaching move and a quarter
-of the shortest push, at a ripple the balance QP tolerates when it feeds r back as u.
+25, 50, 100 rad/s, while its mean did not change. 40 rad/s keeps the lag (25 ms, 6 ticks) a
+fortieth of a reaching move and an eighth of the shortest push, at a ripple the balance QP
+tolerates when it feeds r back as u: it fell least in the 512-episode table of
+docs/results-heavy-arms.md (against 20 rad/s, the default until 0.2: -0.041 [-0.068, -0.014]
+falls on `z1`, -0.023 [-0.052, +0.005] on `regular`).
 
 Delay (`ObserverConfig.delay`, ticks). With a measurement-to-torque delay of D ticks
 (`EnvConfig.sensor_delay`) the forces commanded at tick j act over [t_{j+D}, t_{j+D+1}], so the
@@ -86,8 +88,8 @@ class ObserverConfig:
     """Observer gains, rad/s (the bandwidth K of the estimate's first-order lag; see the module
     docstring for the choice): a number for the three axes, or an (x, y, z) tuple."""
 
-    k_force: float | tuple[float, float, float] = 20.0  # rad/s, on [m v_com]
-    k_torque: float | tuple[float, float, float] = 20.0  # rad/s, on [I_w omega]
+    k_force: float | tuple[float, float, float] = 40.0  # rad/s, on [m v_com]
+    k_torque: float | tuple[float, float, float] = 40.0  # rad/s, on [I_w omega]
     # ticks from a force's command to its action (see the module docstring; static: it sizes
     # `ObserverState.pending`)
     delay: int = struct.field(pytree_node=False, default=0)

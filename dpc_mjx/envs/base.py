@@ -109,9 +109,9 @@ class DpcEnv(Env):
             arm_estimate=config.arm_estimate_config(),
             low_level=config.low_level,
         )
-        self._arm_model = self.controller.arm  # None without an arm
-        # on for the controllers that add it, and under u_base 'model' (the data its policy is
-        # regressed on records it: `adapter.data.Dataset.u_model`)
+        self.arm_model = self.controller.arm  # the arms' rigid-body model (None: no arm)
+        # on for the controllers that add it, and under u_base 'model' (its policy's u is the
+        # model wrench plus what the policy learned)
         self.use_arm_model(config.controller.adds(config.u_base)[1] or config.u_base == "model")
         self.props = prop_layout(self.model)
         self.sampler = make_sampler(config, self.model, self.lay, len(self.props.objects))
@@ -128,7 +128,7 @@ class DpcEnv(Env):
         (docs/benchmarks.md, "The arms' model wrench"), so only the envs that read it compute
         it (`__init__`; `ControllerBatch` turns it on for a batch with a controller that adds
         it)."""
-        arm = self._arm_model if on else None
+        arm = self.arm_model if on else None
         self.controller = dataclasses.replace(self.controller, arm=arm)
 
     # task hooks -----------------------------------------------------------------------------

@@ -127,9 +127,9 @@ class EnvConfig:
     # u_oracle - u_obs, `policy.regression`), or 'gravity' (u = the arms' weight and its torque
     # about the base's COM, from the arm file's masses at the arm's pose of each tick
     # (`DpcEnv.arm_gravity`), + the policy's u, trained on u_oracle - u_gravity: the learned part
-    # is the arm's motion, its weight comes from its file), or 'model' (u = the arms' model
-    # wrench of each tick, their inverse dynamics from the measured states (`arm_estimate`),
-    # + the policy's u, trained on u_oracle - u_model: the learned part is what the model misses)
+    # is the arm's motion, its weight comes from its file), or 'model' (shipped; u = the model
+    # wrench of the arms each tick, their inverse dynamics from measured states (`arm_estimate`),
+    # + the policy's u, trained on what the model cannot know: the pushes and the payload)
     u_base: str = "zero"
     max_force: float | tuple[float, float, float] = (15.0, 15.0, 60.0)  # N
     max_torque: float | tuple[float, float, float] = (12.0, 12.0, 3.0)  # N·m
@@ -151,7 +151,7 @@ class EnvConfig:
     # whether it is aligned to the sensor_delay above (True: the known wrench uses the forces
     # that acted over the tick just past, commanded 1 + sensor_delay ticks before; False: those
     # of the previous tick).
-    observer_gain: float | tuple[float, float] = 20.0
+    observer_gain: float | tuple[float, float] = 40.0
     observer_aligned: bool = False
 
     # The arms' model wrench (`control/arm_estimate.py`; the 'feedforward' controllers' u and

@@ -15,7 +15,9 @@ exploration scale softplus(.) + 1e-3 to `init_std` (pre-tanh), on the adapter's 
 samples (`Dataset.u_oracle`, collected with MBC; with `EnvConfig.u_base` 'observer' the target is
 u_oracle - u_obs, the part of u the observer's estimate misses, in the same frame and scale, with
 'gravity' u_oracle - u_gravity, the part the arms' weight at their pose leaves, and
-with 'model' u_oracle - u_model, the part the arms' model wrench misses, and
+with 'model' u_unmodelled, what the arms' model cannot know (the oracle's u minus the model
+wrench on the simulator's exact state and accelerations: the pushes and the payload as the mount
+feels them; privileged labels, `Dataset.u_unmodelled`), and
 with `slow_s` > 0 only its fast part: minus its exponential average over `slow_s` seconds along
 each episode, `regression_target`); the
 observation statistics start from the same samples. The last `val_fraction` of the samples are
@@ -42,12 +44,15 @@ from dpc_mjx.policy.policy import observation_size, policy_observation
 from dpc_mjx.stats import r2
 
 U_CLIP = 0.95  # targets stay inside tanh's range
+# A target component whose held-out std is below this (action units: 0.015 N of a 15 N bound)
+# does not vary (no push along it); its R^2 is reported as None, not 1 - resid / ~0
+_CONSTANT_STD = 1e-3
 # What the actor is fitted to, in words, by `EnvConfig.u_base` (`regression_target`)
 REGRESSION_TARGETS = {
     "zero": "the oracle's u",
     "observer": "u_oracle - u_obs",
     "gravity": "u_oracle - u_gravity",
-    "model": "u_oracle - u_model",
+    "model": "u_unmodelled (u_oracle - the model wrench on the exact state)",
 }
 
 # `trainer` is SAC's (`sac.trainer.Trainer`, `Carry`), taken by what it has, so that this layer
@@ -138,8 +143,12 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
     """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
     -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
     same frame) where `u_base` is 'observer' (`EnvConfig.u_base`), minus the arms' gravity
-    wrench u_gravity (`Dataset.u_gravity`) where it is 'gravity', minus the arms' model wrench
-    u_model (`Dataset.u_model`) where it is 'model'. With `slow_s` > 0 (s; one
+    wrench u_gravity (`Dataset.u_gravity`) where it is 'gravity', and only what the arms' model
+    cannot know (`Dataset.u_unmodelled`) where it is 'model': not u_oracle minus the model
+    wrench the controller computes, whose difference also holds the arms' reaction to the
+    trunk's actual acceleration, which the controller leaves to the balance QP on purpose (a
+    policy that learns it feeds it back an env step late: docs/results-arm-model.md). With
+    `slow_s` > 0 (s; one
     number, or (force, torque) where 0 keeps that part whole; u_base 'observer' only) the
     residual d = u_oracle - u_obs loses its slow part, its exponential average along each
     episode (`slow_part`): u = d - slow(d), the correction of the observer's lag that a policy
@@ -157,8 +166,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
         raise DpcError("slow_s splits the observer's residual: it needs u_base='observer'.")
     elif u_base == "gravity":  # what the arms' weight at their pose leaves
         u = u - data.u_gravity_in(u_frame)
-    elif u_base == "model":  # what the arms' model wrench misses
-        u = u - data.u_model_in(u_frame)
+    elif u_base == "model":  # what the arms' model cannot know (privileged labels)
+        u = data.u_unmodelled_in(u_frame)
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)
 
 
@@ -201,12 +210,15 @@ def _predictor(policy_network, normalizer):
 
 
 def _report(predict, params, val, history: dict, samples: int, action_size: int) -> dict:
-    """The fit on the held-out samples: per-component R^2, MSE, the epochs trained."""
+    """The fit on the held-out samples: per-component R^2 (None where the target is constant,
+    e.g. a force no push acts along under u_base 'model'), MSE, the epochs trained."""
     pred = np.asarray(predict(params, val[0])[0])
     y_va = np.asarray(val[1])
+    scores = r2(y_va, pred, floor=1e-12)
+    constant = np.std(y_va, axis=0) < _CONSTANT_STD  # nothing but float32 rounding to explain
     return {
         "samples": samples,
         "best_epoch": history["best_epoch"] + 1,  # epochs trained
         "val_mse": float(np.mean((pred - y_va) ** 2)),
-        "r2": [float(v) for v in r2(y_va, pred, floor=1e-12)][:action_size],
+        "r2": [None if c else float(v) for v, c in zip(scores, constant)][:action_size],
     }

@@ -239,7 +239,7 @@ def _run_options(p: argparse.ArgumentParser, resume: bool) -> None:
         "paper (SAC from a random actor, asymmetric critic)",
     )
     _device_option(p)
-    p.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
+    p.add_argument("--set", nargs="*", action="extend", default=[], metavar="NAME=VALUE")
     p.add_argument("--logdir", help="TensorBoard events: LOGDIR/<run> (default RUN/tensorboard)")
     if resume:
         p.add_argument(

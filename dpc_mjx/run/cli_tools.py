@@ -36,7 +36,9 @@ BASE_HELP = "the quadruped: a1 (default), go1, go2, b1, b1-z1, or your .urdf/.xm
 
 def add_env_options(p: argparse.ArgumentParser, help_text: str | None = None) -> None:
     """`--env NAME=VALUE ...` and `--base`, read back by `env_options`."""
-    p.add_argument("--env", nargs="*", default=[], metavar="NAME=VALUE", help=help_text)
+    p.add_argument(
+        "--env", nargs="*", action="extend", default=[], metavar="NAME=VALUE", help=help_text
+    )
     p.add_argument("--base", help=BASE_HELP)
 
 

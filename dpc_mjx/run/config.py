@@ -48,8 +48,10 @@ TRAINED_SAC = sac.SacConfig(
 
 # Named recipes: dotted overrides of `RunConfig()` (`dpc-mjx train --recipe NAME`, then `--set`).
 RECIPES: dict[str, dict[str, Any]] = {
-    # the shipped `regular` export: the actor regressed on the oracle's u, no SAC stage
-    "default": {},
+    # the shipped `regular` export: DPC on the arms' model wrench (u = the model wrench from the
+    # measured states + the policy's u), the actor regressed on what the model cannot know, no
+    # SAC stage (docs/results-arm-model.md)
+    "default": {"env.u_base": "model"},
     # the paper's recipe, made to work (`regular-paper`): SAC from a random actor on the paper's
     # reward; the actor never sees an oracle label. Ours: an asymmetric critic (it sees u_oracle,
     # the payload and the push force: privileged, simulator-only), a low starting temperature,

@@ -249,7 +249,7 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
             reports.append(report)
             target = REGRESSION_TARGETS[env_config.u_base]
             slow = f" less its slow part ({config.residual_slow_s} s)" * config.splits_residual
-            r2 = ", ".join(f"{v:.2f}" for v in report["r2"])
+            r2 = ", ".join("constant" if v is None else f"{v:.2f}" for v in report["r2"])
             print(
                 f"sac: actor regressed on {target}{slow} ({report['samples']:,} samples; "
                 f"held-out R^2 per u component {r2})",

@@ -109,7 +109,7 @@ class RunEvents:
         """The actor regressed on the oracle's u, one report per round (`regress_actor`'s)."""
         points = []
         for round_, report in enumerate(reports):
-            r2 = {f"r2/u{i}": v for i, v in enumerate(report["r2"])}
+            r2 = {f"r2/u{i}": v for i, v in enumerate(report["r2"]) if v is not None}
             points.append((round_, r2 | {"val_mse": report["val_mse"]}))
         self._write("regression", points)
 
