@@ -30,7 +30,6 @@ from dpc_mjx.control.qp.ops import (
     _TINY,
     _all_finite,
     _cho_solve,
-    _cholesky,
     _dot,
     _fold,
     _inf_norm,
@@ -39,7 +38,7 @@ from dpc_mjx.control.qp.ops import (
     _pin,
     _pin_flag,
 )
-from dpc_mjx.control.qp.problem import _g_mtv, _g_mv, _normal_columns, _prepare, _Scaled
+from dpc_mjx.control.qp.problem import _g_mtv, _g_mv, _normal_factor, _prepare, _Scaled
 from dpc_mjx.control.qp.settings import QPResult, QPSettings
 from dpc_mjx.control.qp.structure import _Structure
 
@@ -81,7 +80,7 @@ def _start(pr: _Scaled, warm, cfg: QPSettings):
     Warm: the previous x, s = h - Gx lifted to >= warm_margin (1 + |h_i|), the previous z lifted
     to >= warm_margin (1 + max z) (equilibrated units).
     """
-    chol = _cholesky(_normal_columns(pr, jp.ones_like(pr.hs)), cfg.pivot_floor)
+    chol = _normal_factor(pr, jp.ones_like(pr.hs), cfg.pivot_floor)
     x0 = _cho_solve(chol, -pr.qs + _g_mtv(pr, pr.hs))
     s0 = jp.maximum(pr.hs - _g_mv(pr, x0), 1.0)
     z0 = jp.ones_like(pr.hs)
@@ -124,7 +123,7 @@ def _newton_step(pr: _Scaled, cfg: QPSettings, it: _Iterate, rd: jax.Array) -> _
     rp = gx + s - pr.hs  # primal residual of G x + s = h
     mu = _pin(_dot(s, z) / m, one)
     w = jp.minimum(z / s, _BIG)
-    chol = _cholesky(_normal_columns(pr, w), cfg.pivot_floor)
+    chol = _normal_factor(pr, w, cfg.pivot_floor)
 
     def direction(rc):  # Newton direction of the KKT system with Z ds + S dz = -rc
         dx = _cho_solve(chol, -rd - _g_mtv(pr, _pin(w * rp - rc / s, one)))

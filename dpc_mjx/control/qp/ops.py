@@ -135,13 +135,17 @@ class _DenseFactor:
 
     @classmethod
     def of(cls, columns: list[jax.Array], floor: float) -> _DenseFactor:
-        n = len(columns)
         pad = [
             jp.concatenate([jp.zeros((j,) + c.shape[1:], c.dtype), c])
             for j, c in enumerate(columns)
         ]
         lower_t = jp.stack(pad)  # (n, n, ...): [j, i] = H[i, j] for i >= j, 0 above
-        H = jp.moveaxis(lower_t, (0, 1), (-1, -2))  # (..., n, n), lower triangle of H
+        return cls.of_matrix(jp.moveaxis(lower_t, (0, 1), (-1, -2)), floor)
+
+    @classmethod
+    def of_matrix(cls, H: jax.Array, floor: float) -> _DenseFactor:
+        """The factor of H (..., n, n), batch-major; only its lower triangle is read."""
+        n = H.shape[-1]
         diag = jp.diagonal(H, axis1=-2, axis2=-1)  # (..., n)
         H = H + (floor * diag + _TINY)[..., None] * jp.eye(n, dtype=H.dtype)
         return cls(jax.lax.linalg.cholesky(H, symmetrize_input=False))

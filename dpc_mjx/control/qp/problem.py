@@ -16,7 +16,19 @@ import jax.numpy as jp
 import numpy as np
 from flax import struct
 
-from dpc_mjx.control.qp.ops import _all_finite, _fold, _inf_norm, _max, _pin, _pin_flag, _sum, _take
+from dpc_mjx.control.qp.ops import (
+    _UNROLL_MAX,
+    _all_finite,
+    _cholesky,
+    _DenseFactor,
+    _fold,
+    _inf_norm,
+    _max,
+    _pin,
+    _pin_flag,
+    _sum,
+    _take,
+)
 from dpc_mjx.control.qp.settings import QPSettings
 from dpc_mjx.control.qp.structure import _Structure
 
@@ -78,6 +90,8 @@ class _Scaled:
     g_cols: jax.Array  # (n, L, ...) the entries of each column of Gs (st.cols), for Gs'y
     gg_cols: list  # per column j of H: None or the products Gs_ri Gs_rj (T, hi - lo, ...) of
     #   st.normal[j], the diagonal entry times (1 + reg)
+    p_major: jax.Array | None  # over _UNROLL_MAX variables: Ps batch-major (..., n, n), the
+    #   diagonal times (1 + reg), for the dense factor (`_normal_factor`; p_cols is then empty)
     st: _Structure = struct.field(pytree_node=False)  # the pattern of G and its index tables
 
 
@@ -153,13 +167,20 @@ def _prepare(P, q, G, h, cfg: QPSettings, st: _Structure) -> _Scaled:
     norms = _pin(jp.stack([_inf_norm(h), _inf_norm(q)]), one)
     Ps, qs = Ps * c, qs * c
     # H = Ps + Gs' diag(w) Gs is assembled by columns from the products of the rows of Gs.
-    p_cols = [Ps[j:, j] * _diagonal_factor(n - j, cfg.regularization, q) for j in range(n)]
+    if n > _UNROLL_MAX:  # H is formed batch-major from Ps (`_normal_factor`)
+        reg = 1.0 + cfg.regularization * jp.eye(n, dtype=q.dtype)
+        p_cols, p_major = [], jp.moveaxis(Ps * reg.reshape(reg.shape + (1,) * (q.ndim - 1)),
+                                          (0, 1), (-2, -1))  # fmt: skip
+    else:
+        p_cols = [Ps[j:, j] * _diagonal_factor(n - j, cfg.regularization, q) for j in range(n)]
+        p_major = None
     hs = h * e
     inverses = (inv_d, inv_e, inv_c)
     tables = _g_tables(Gs, st, cfg)
     return _Scaled(
-        P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, *tables, st
-    )
+        P, q, h, Ps, qs, Gs, hs, d, e, c, *inverses, g_abs, norms, finite, one, p_cols, *tables,
+        p_major, st,
+    )  # fmt: skip
 
 
 def _normal_columns(pr: _Scaled, w: jax.Array) -> list[jax.Array]:
@@ -178,3 +199,25 @@ def _normal_columns(pr: _Scaled, w: jax.Array) -> list[jax.Array]:
         whole = hi - lo == len(p_col)
         columns.append(part if whole else jp.concatenate([p_col[:lo], part, p_col[hi:]]))
     return columns
+
+
+def _normal_factor(pr: _Scaled, w: jax.Array, floor: float):
+    """The factor (`ops._cholesky`) of H = Ps + Gs' diag(w) Gs for w (m, ...). Up to _UNROLL_MAX
+    variables from `_normal_columns`; above, H is Ps batch-major (`p_major`) plus G's products
+    added at their K entries (st.normal_entries), then factored dense: no (n, n, ...) columns
+    to assemble and transpose every iteration."""
+    if pr.p_major is None:
+        return _cholesky(_normal_columns(pr, w), floor)
+    values = []  # (hi - lo, ...) per column j of H that G' W G adds to
+    for gg, spec in zip(pr.gg_cols, pr.st.normal, strict=True):
+        if gg is not None:
+            rows = spec[4]
+            part = gg[0] * _take(w, rows[0])
+            for t in range(1, rows.shape[0]):
+                part = part + gg[t] * _take(w, rows[t])
+            values.append(part)
+    rows, cols = pr.st.normal_entries
+    H = pr.p_major
+    if values:
+        H = H.at[..., rows, cols].add(jp.moveaxis(jp.concatenate(values), 0, -1))  # (..., K)
+    return _DenseFactor.of_matrix(H, floor)

@@ -80,6 +80,16 @@ class _Structure:
             out.append((lo, hi, a, b, r))
         return out
 
+    @functools.cached_property
+    def normal_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) rows and (K,) columns of the entries of H that G' diag(w) G adds to, column by
+        column as in `normal` (column j: rows j + lo .. j + hi - 1)."""
+        spans = [(j, s[0], s[1]) for j, s in enumerate(self.normal) if s is not None]
+        rows = [np.arange(j + lo, j + hi) for j, lo, hi in spans]
+        cols = [np.full(hi - lo, j) for j, lo, hi in spans]
+        empty = np.zeros(0, np.int64)
+        return np.concatenate([empty, *rows]), np.concatenate([empty, *cols])
+
 
 @functools.lru_cache(maxsize=None)
 def _structure(m: int, n: int, pattern: tuple[tuple[bool, ...], ...] | None) -> _Structure:
