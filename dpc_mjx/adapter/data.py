@@ -312,10 +312,10 @@ def collect(
             if i < burn_chunks:  # staggered starts: these rows are dropped
                 pbar.set_postfix_str(f"burn-in {(i + 1) * chunk}/{burn_chunks * chunk} steps")
                 continue
-            obs, u, yaw, drp, keep, grav, model = (
+            obs, u, yaw, drp, keep, grav, unmodelled = (
                 x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out
             )
-            parts.append(tuple(x[keep] for x in (obs, drp, ids, u, yaw, grav, model)))
+            parts.append(tuple(x[keep] for x in (obs, drp, ids, u, yaw, grav, unmodelled)))
             kept += int(keep.sum())
             pbar.update(min(int(keep.sum()), samples - pbar.n))
             if kept >= samples:
