@@ -32,8 +32,10 @@ Cost and its condensed QP (forces only, F = (f_0 .. f_{N-1}) (12 N,); X = (x_1 .
     1/2 F'PF + q'F + const = J / 2,   P = Gamma' Q Gamma + R,  q = Gamma' Q (X_free - X_ref)
 
 Constraints: per step the balance QP's 24 rows (`balance.friction_constraints`), G block-diagonal
-(24 N, 12 N), passed to `qp.solve` as its static pattern. Solved by our interior point with a fixed
-number of iterations, warm-started from the previous plan.
+(24 N, 12 N), passed to `qp.solve` as its static pattern and its 40 N entries. Solved by our
+interior point with a fixed number of iterations, warm-started from the previous plan, each
+Newton system by a Riccati recursion over the model's steps (`mpc_kkt`), which also gives P x:
+P (12 N, 12 N) is never formed (`MPCQP.P` forms it for a reference solver).
 
 Numbers (`MPCConfig`): N = 10 steps of dt = 30 ms (a 0.3 s horizon: one trot period), re-solved
 every 5 control ticks of 4 ms (20 ms: the first tick of every 50 Hz env step). Between re-solves
@@ -52,7 +54,7 @@ import jax.numpy as jp
 import numpy as np
 from flax import struct
 
-from dpc_mjx.control import balance, gait, qp
+from dpc_mjx.control import balance, gait, mpc_kkt, qp
 from dpc_mjx.control.state import BodyState
 from dpc_mjx.errors import DpcError
 from dpc_mjx.rotations import rot_z
@@ -125,18 +127,49 @@ class MPCPlan:
 class MPCQP:
     """The condensed QP `min 1/2 F'PF + q'F + const  s.t.  G F <= h` and its model.
 
-    P (n, n), q (n,), G (m, n), h (m,), const (): n = 12 N, m = 24 N. gamma (12 N, 12 N) and
-    x_free (12 N,): X = gamma F + x_free. contact (N, 4) bool: the stance schedule.
+    q (n,), h (m,), const (): n = 12 N, m = 24 N. g_blocks (N, 24, 12): the diagonal blocks of
+    G (m, n) (`G`, `g_entries`). gamma (12 N, 12 N) and x_free (12 N,): X = gamma F + x_free.
+    contact (N, 4) bool: the stance schedule. A (N, 12, 12), B (N, 12, 12): the model's steps
+    (`step_model`), from which `mpc_kkt` solves the interior point's Newton systems and forms
+    P x; Q (12,), R (): the weights (`MPCConfig`) of P = gamma' diag(Q tiled) gamma + R I (`P`,
+    formed only for a reference solver). (Any leading batch axes before these shapes.)
     """
 
-    P: jax.Array
     q: jax.Array
-    G: jax.Array
+    g_blocks: jax.Array
     h: jax.Array
     const: jax.Array
     gamma: jax.Array
     x_free: jax.Array
     contact: jax.Array
+    A: jax.Array
+    B: jax.Array
+    Q: jax.Array
+    R: jax.Array
+
+    @property
+    def P(self) -> jax.Array:
+        """(n, n) P = gamma' diag(Q tiled) gamma + R I (for a reference solver; `solve_mpc`
+        never forms it)."""
+        n = self.gamma.shape[-1]
+        q_diag = jp.tile(self.Q, n // N_STATE)  # (..., 12 N)
+        P = jp.swapaxes(self.gamma, -1, -2) @ (q_diag[..., None] * self.gamma)
+        return P + self.R[..., None, None] * jp.eye(n, dtype=P.dtype)
+
+    @property
+    def G(self) -> jax.Array:
+        """(m, n) G, block-diagonal (for a reference solver; `solve_mpc` reads `g_entries`)."""
+        n, rows, cols = self.g_blocks.shape[-3:]
+        eye = jp.eye(n, dtype=self.g_blocks.dtype)
+        G = jp.einsum("kl,...kij->...kilj", eye, self.g_blocks)
+        return G.reshape(self.g_blocks.shape[:-3] + (n * rows, n * cols))
+
+    @property
+    def g_entries(self) -> jax.Array:
+        """(K,) the entries of G's pattern (`g_pattern`), row-major: each block's in turn."""
+        blocks = self.g_blocks.reshape(self.g_blocks.shape[:-2] + (-1,))
+        entries = blocks[..., np.flatnonzero(balance.G_PATTERN)]  # (..., N, 40)
+        return entries.reshape(entries.shape[:-2] + (-1,))
 
 
 def step_model(params: balance.BalanceParams, dt: float, yaw, com, feet, contact):
@@ -221,15 +254,13 @@ def build_mpc_qp(params, config: MPCConfig, x0, x_ref, feet, contact, wrench) ->
     gamma, x_free = condense(A, B, e, x0)
     q_diag = jp.tile(config.Q, n)  # (12 N,)
     err = x_free - x_ref.reshape(-1)
-    gq = gamma.T * q_diag[None, :]
-    P = gq @ gamma + config.R * jp.eye(config.n_vars)
     G, h = jax.vmap(balance.friction_constraints, (None, None, None, 0))(
         params.mu, params.f_min, params.f_max, contact
     )  # (N, 24, 12), (N, 24)
-    G = jp.einsum("kl,kij->kilj", jp.eye(n), G).reshape(config.n_rows, config.n_vars)
     return MPCQP(
-        P=0.5 * (P + P.T), q=gq @ err, G=G, h=h.reshape(-1),
+        q=gamma.T @ (q_diag * err), g_blocks=G, h=h.reshape(-1),
         const=0.5 * jp.sum(q_diag * err * err), gamma=gamma, x_free=x_free, contact=contact,
+        A=A, B=B, Q=config.Q, R=jp.asarray(config.R, gamma.dtype),
     )  # fmt: skip
 
 
@@ -242,11 +273,14 @@ def g_pattern(steps: int) -> np.ndarray:
 
 def solve_mpc(config: MPCConfig, prob: MPCQP, warm_start: qp.QPResult | None = None):
     """(forces (N, 4, 3) N, world, swing feet exactly 0; the QPResult) of a built MPCQP, by our
-    interior point with `config.iterations` iterations and the block-diagonal pattern of G."""
+    interior point with `config.iterations` iterations, the block-diagonal pattern of G and the
+    Newton systems solved by a Riccati recursion over the model's steps (`mpc_kkt`)."""
     settings = qp.QPSettings(iterations=config.iterations)
     pattern = g_pattern(config.steps)
-    res = qp.solve(prob.P, prob.q, prob.G, prob.h, warm_start=warm_start, settings=settings,
-                   g_pattern=pattern)  # fmt: skip
+    data = (prob.A, prob.B, config.Q, jp.asarray(config.R, prob.q.dtype))
+    res = qp.solve(None, prob.q, prob.g_entries, prob.h, warm_start=warm_start, settings=settings,
+                   g_pattern=pattern, normal_solver=mpc_kkt.RiccatiSolver(config.steps),
+                   normal_data=data)  # fmt: skip
     forces = res.x.reshape(config.steps, balance.N_FEET, 3) * prob.contact[..., None]
     return forces, res
 

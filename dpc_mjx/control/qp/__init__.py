@@ -16,6 +16,7 @@ The modules, in the order a call goes through them:
   batching.py   the custom_vmap rule: the batch on the last axis, in chunks of `_CHUNK`.
   kernel.py     the interior-point iterations: start, Mehrotra steps, best iterate, result.
   problem.py    sanitising, Ruiz equilibration and G's stored products (`_Scaled`).
+  normal.py     the hook for a caller's own factor of the Newton systems (`NormalSolver`).
   structure.py  G's static nonzero pattern and its index tables (`_Structure`).
   ops.py        ops along the small leading axes: folds, matvecs, Cholesky, `_pin`.
 
@@ -27,6 +28,7 @@ from dpc_mjx.control.qp.api import _solve_reference as _solve_reference
 from dpc_mjx.control.qp.api import solve
 from dpc_mjx.control.qp.batching import _CHUNK as _CHUNK
 from dpc_mjx.control.qp.batching import _CHUNK_SPARSE as _CHUNK_SPARSE
+from dpc_mjx.control.qp.normal import NormalParts, NormalSolver
 from dpc_mjx.control.qp.settings import QPResult, QPSettings
 
-__all__ = ["QPResult", "QPSettings", "solve"]
+__all__ = ["NormalParts", "NormalSolver", "QPResult", "QPSettings", "solve"]

@@ -34,11 +34,18 @@ from dpc_mjx.control.qp.ops import (
     _fold,
     _inf_norm,
     _max,
-    _mv,
     _pin,
     _pin_flag,
 )
-from dpc_mjx.control.qp.problem import _g_mtv, _g_mv, _normal_factor, _prepare, _Scaled
+from dpc_mjx.control.qp.problem import (
+    _g_mtv,
+    _g_mv,
+    _normal_factor,
+    _p_mv,
+    _prepare,
+    _ps_mv,
+    _Scaled,
+)
 from dpc_mjx.control.qp.settings import QPResult, QPSettings
 from dpc_mjx.control.qp.structure import _Structure
 
@@ -99,7 +106,7 @@ def _start(pr: _Scaled, warm, cfg: QPSettings):
 def _residuals(pr: _Scaled, cfg: QPSettings, it: _Iterate) -> tuple[jax.Array, _Figures]:
     """The scaled dual residual rd = Ps x + qs + Gs'z (n, ...) and the _Figures of the iterate."""
     m = pr.hs.shape[0]
-    px = _pin(_mv(pr.Ps, it.x), pr.one)
+    px = _pin(_ps_mv(pr, it.x), pr.one)
     rd = _pin(px + pr.qs + _g_mtv(pr, it.z), pr.one)
     primal = _inf_norm(jp.maximum(it.gx - pr.hs, 0.0) * pr.inv_e)
     dual = _inf_norm(rd * pr.inv_d) * pr.inv_c
@@ -153,9 +160,10 @@ def _newton_step(pr: _Scaled, cfg: QPSettings, it: _Iterate, rd: jax.Array) -> _
     )
 
 
-def _kernel(P, q, G, h, warm, cfg: QPSettings, st: _Structure) -> QPResult:
-    """The method on arrays with trailing batch axes (...); warm is None or (x, z, valid)."""
-    pr = _prepare(P, q, G, h, cfg, st)
+def _kernel(P, q, G, h, warm, cfg: QPSettings, st: _Structure, data=()) -> QPResult:  # noqa: PLR0913, PLR0917
+    """The method on arrays with trailing batch axes (...); warm is None or (x, z, valid); data
+    the normal solver's arrays (normal.py)."""
+    pr = _prepare(P, q, G, h, cfg, st, data)
     x0, s0, z0 = _start(pr, warm, cfg)
     it0 = _Iterate(x0, s0, z0, _g_mv(pr, x0))
     _, fig0 = _residuals(pr, cfg, it0)
@@ -187,7 +195,7 @@ def _result(pr: _Scaled, it: _Iterate, fig: _Figures, first: jax.Array) -> QPRes
     finite = _all_finite(x_out) & _all_finite(z_out) & _all_finite(s_out)
     valid = _pin_flag(pr.finite & finite & (fig.primal <= fig.primal_tol), pr.one)
     x_out, z_out, s_out = (_pin(jp.where(valid, v, 0.0), pr.one) for v in (x_out, z_out, s_out))
-    objective = 0.5 * _dot(x_out, _mv(pr.P, x_out)) + _dot(pr.q, x_out)
+    objective = 0.5 * _dot(x_out, _p_mv(pr, x_out)) + _dot(pr.q, x_out)
     zero = jp.zeros((), x_out.dtype)
     return QPResult(
         x=x_out,
@@ -204,6 +212,8 @@ def _result(pr: _Scaled, it: _Iterate, fig: _Figures, first: jax.Array) -> QPRes
 
 
 def _run_kernel(args: tuple, cfg: QPSettings, st: _Structure) -> QPResult:
-    """args = (P, q, G, h) or (P, q, G, h, warm x, warm z, warm valid), trailing batch axes."""
+    """args = (P, q, G, h[, warm x, warm z, warm valid], *normal data), trailing batch axes."""
+    n_data = 0 if st.solver is None else st.solver.n_data
+    args, data = tuple(args[: len(args) - n_data]), tuple(args[len(args) - n_data :])
     warm = tuple(args[4:]) or None
-    return _kernel(*args[:4], warm, cfg, st)
+    return _kernel(*args[:4], warm, cfg, st, data)

@@ -105,7 +105,8 @@ def _take(x: jax.Array, idx: np.ndarray) -> jax.Array:
 # Cholesky emits ~n^2 ops per factor and ~n^2 per solve, and XLA took over 4 minutes (not
 # finished) to compile a batch of the MPC's QPs (n = 120: 10 steps x 12 forces, `control/mpc.py`)
 # with it, against 10 s dense; LAPACK's potrf and two triangular solves take ~4 ms for a
-# (64, 120, 120) batch on one core. The balance QP (n = 12) keeps the unrolled factor.
+# (64, 120, 120) batch on one core. The balance QP (n = 12) keeps the unrolled factor; the MPC
+# now brings its own (a Riccati recursion, `control/mpc_kkt.py`, through normal.py), ~1 ms.
 _UNROLL_MAX = 32
 
 
@@ -183,8 +184,9 @@ def _cholesky_unrolled(columns: list[jax.Array], floor: float) -> list[tuple[jax
 
 
 def _cho_solve(chol, b: jax.Array) -> jax.Array:
-    """Solve L L' x = b for b (n, ...), with L from `_cholesky` (column-wise or dense)."""
-    if isinstance(chol, _DenseFactor):
+    """Solve L L' x = b for b (n, ...), with L from `_cholesky` (column-wise) or any factor with
+    a `solve` (`_DenseFactor`, a normal solver's, normal.py)."""
+    if not isinstance(chol, list):
         return chol.solve(b)
     n = len(chol)
     y, r = [], b

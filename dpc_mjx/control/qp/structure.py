@@ -4,7 +4,8 @@
 nonzero (e.g. `balance.G_PATTERN`: 40 of 288). The kernel then stores and multiplies only those:
 G x, G'y and the products G_ri G_rj that form H = P + G' diag(w) G. P and the Cholesky factor stay
 dense. A `_Structure` (one per pattern, cached) holds the numpy index tables of these products; a
-dense G is the pattern None, for which the kernel uses slices instead of gathers.
+dense G is the pattern None, for which the kernel uses slices instead of gathers. A caller that
+knows more of H's structure than G's pattern says adds its own factor of H (`solver`, normal.py).
 docs/decisions-controller.md ("Low-level controller: the QP solver") explains the method.
 """
 
@@ -14,6 +15,8 @@ import dataclasses
 import functools
 
 import numpy as np
+
+from dpc_mjx.control.qp.ops import _UNROLL_MAX
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,6 +31,7 @@ class _Structure:
     m: int
     n: int
     pattern: tuple[tuple[bool, ...], ...] | None
+    solver: object = None  # a normal.NormalSolver, or None: the kernel factors H itself
 
     @functools.cached_property
     def mask(self) -> np.ndarray:  # (m, n) bool
@@ -40,6 +44,32 @@ class _Structure:
         width = max(1, *(len(x) for x in lists))
         zero = self.m * self.n
         return np.array([x + [zero] * (width - len(x)) for x in lists], np.int64)
+
+    @property
+    def implicit_p(self) -> bool:
+        """P reaches the kernel as a placeholder (0,): the normal solver knows it (normal.py)."""
+        return self.solver is not None and self.solver.implicit_p
+
+    @functools.cached_property
+    def compact(self) -> bool:
+        """G reaches the kernel as its pattern's entries (K,) (`entries`), not (m, n): a pattern
+        of over `ops._UNROLL_MAX` variables (the MPC's G: 400 of 28,800 entries), so that no
+        op of the kernel reads the whole G."""
+        return self.pattern is not None and self.n > _UNROLL_MAX
+
+    @functools.cached_property
+    def entries(self) -> np.ndarray:
+        """(K,) the flat indices r n + j of the pattern's entries, row-major."""
+        return np.flatnonzero(self.mask)
+
+    def at(self, flat: np.ndarray) -> np.ndarray:
+        """Flat entry indices (m n: the zero) -> where the kernel reads them: the same in G
+        flattened, or for a `compact` G their places among `entries` (K: the zero)."""
+        if not self.compact:
+            return flat
+        where = np.full(self.m * self.n + 1, len(self.entries), np.int64)
+        where[self.entries] = np.arange(len(self.entries))
+        return where[flat]
 
     @functools.cached_property
     def rows(self) -> tuple[np.ndarray, np.ndarray]:
@@ -92,5 +122,7 @@ class _Structure:
 
 
 @functools.lru_cache(maxsize=None)
-def _structure(m: int, n: int, pattern: tuple[tuple[bool, ...], ...] | None) -> _Structure:
-    return _Structure(m, n, pattern)
+def _structure(
+    m: int, n: int, pattern: tuple[tuple[bool, ...], ...] | None, solver: object = None
+) -> _Structure:
+    return _Structure(m, n, pattern, solver)
