@@ -177,7 +177,7 @@ def _step_parts(t: Timer, env, d, info, dist, keys, noise):
     t.row("privileged (oracle u, pushes)", env._privileged, d, dist, per_tick=False)
     t.row(
         "oracle u alone",
-        lambda d: oracle_u(env.lay, d, env._com_pos(d)),
+        lambda d: oracle_u(env.lay, d, env.com_pos(d)),
         d,
         per_tick=False,
     )

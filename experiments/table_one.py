@@ -15,7 +15,8 @@ two arms for several balls):
     pushing / pusher           the `heavier` row (our `pusher`: the `regular` links with a 0.5 kg
                                flat plate; our `heavier` keeps a 0.5 kg gripper)
 
-Every cell runs MBC, the observer, DPC and the oracle (privileged: the measured arm wrench) on
+Every cell runs every controller (`Controller`: MBC, the observer, the feedforward, the
+feedforward observer, DPC and the oracle, privileged: the measured arm wrench) on
 the same `--episodes` episodes of each task's default config (seeds `--seed`..: say in the docs
 that they chose nothing), for the task's episode length. Writes, per cell, the evaluation's
 markdown and per-episode CSV to `--out`, and prints a summary: fall rate and return per
@@ -39,16 +40,19 @@ CELLS = (  # (task, arm, the paper's row, the task's main measure: a CSV column)
     ("carrying", "double", "double", "ball_on_target"),
     ("pushing", "pusher", "heavier", "box_dx"),
 )
-CONTROLLERS = tuple(Controller)  # mbc, observer, dpc, oracle: the table's columns
+CONTROLLERS = tuple(Controller)  # MBC, the classical ones, DPC, the oracle: the table's columns
+_NAMES = " | ".join(
+    "oracle (privileged)" if c is Controller.ORACLE else c.value for c in CONTROLLERS
+)
 HEADER = (
-    "| task / arm | paper's row | MBC: fall rate, return [95% CI] | observer | DPC "
-    "| oracle (privileged) | DPC - MBC return, paired [95% CI] "
-    "| DPC - MBC fall rate, paired [95% CI] |\n|---|---|---|---|---|---|---|---|"
+    f"| task / arm | paper's row | {_NAMES} (each: fall rate, return [95% CI]) "
+    "| DPC - MBC return, paired [95% CI] | DPC - MBC fall rate, paired [95% CI] |\n"
+    f"|{'---|' * (len(CONTROLLERS) + 4)}"
 )
 MEASURE_HEADER = (
-    "| task / arm | measure (per episode) | MBC [95% CI] | observer | DPC | oracle (privileged) "
+    f"| task / arm | measure (per episode) | {_NAMES} (each [95% CI]) "
     "| DPC - MBC, paired [95% CI] | oracle - MBC, paired [95% CI] |\n"
-    "|---|---|---|---|---|---|---|---|"
+    f"|{'---|' * (len(CONTROLLERS) + 4)}"
 )
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from helpers import ENGINE, FAST_COMPILE, STANDING_STILL
 
 import dpc_mjx
-from dpc_mjx.control.controller import gravity_u
+from dpc_mjx.control.state import gravity_u
 from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.rotations import roll_pitch_yaw, wrench_to_world
 

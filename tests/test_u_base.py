@@ -12,7 +12,7 @@ from helpers import ENGINE, FAST_COMPILE
 
 import dpc_mjx
 from dpc_mjx import DpcError
-from dpc_mjx.adapter.data import Dataset, unmodelled_u
+from dpc_mjx.adapter.data import Dataset, payload_u, unmodelled_u
 from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.policy.regression import U_CLIP, regression_target
 from dpc_mjx.rotations import wrench_to_world, wrench_to_yaw_frame
@@ -66,8 +66,8 @@ def test_only_dpc_adds_the_estimate_and_bad_bases_are_refused():
 
 
 def _random_wrenches(n: int = 32) -> Dataset:
-    """n rows of random u_oracle, u_gravity and u_unmodelled (world frame), u_obs (yaw frame)
-    and headings."""
+    """n rows of random u_oracle, u_gravity, u_unmodelled and u_payload (world frame), u_obs (yaw
+    frame) and headings."""
     rng = np.random.default_rng(0)
     yaw = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
     wrench = lambda: rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # noqa: E731 (N, N·m)
@@ -81,6 +81,7 @@ def _random_wrenches(n: int = 32) -> Dataset:
         yaw=yaw,
         u_gravity=wrench(),
         u_unmodelled=wrench(),
+        u_payload=wrench(),
     )
 
 
@@ -118,18 +119,33 @@ def test_the_target_on_the_arms_gravity_is_the_oracles_u_minus_it():
 
 def test_the_target_on_the_arms_model_is_what_the_model_cannot_know():
     """u_base 'model': the actor is fitted to u_unmodelled alone (the oracle's u minus the model
-    wrench on the exact state), in either frame; without its column, refused."""
+    wrench on the exact state), with `model_target` 'payload' to u_payload alone (the payloads'
+    weight wrench), in either frame; without its column, refused."""
     data = _random_wrenches()
     scale = np.full(6, 40.0, np.float32)
-    world = regression_target(data, scale, "world", "model")
-    expected = np.clip(data.u_unmodelled / scale, -U_CLIP, U_CLIP)
-    np.testing.assert_allclose(world, expected, atol=_U_TOL)
-    yaw_frame = regression_target(data, scale, "yaw", "model")
-    expected = np.asarray(wrench_to_yaw_frame(data.u_unmodelled, data.yaw)) / scale
-    np.testing.assert_allclose(yaw_frame, np.clip(expected, -U_CLIP, U_CLIP), atol=_U_TOL)
-    without = dataclasses.replace(data, u_unmodelled=None)
-    with pytest.raises(DpcError, match="no u_unmodelled"):
-        regression_target(without, scale, "world", "model")
+    for target, column in (("unmodelled", "u_unmodelled"), ("payload", "u_payload")):
+        wrench = getattr(data, column)
+        world = regression_target(data, scale, "world", "model", model_target=target)
+        np.testing.assert_allclose(world, np.clip(wrench / scale, -U_CLIP, U_CLIP), atol=_U_TOL)
+        yaw_frame = regression_target(data, scale, "yaw", "model", model_target=target)
+        expected = np.asarray(wrench_to_yaw_frame(wrench, data.yaw)) / scale
+        np.testing.assert_allclose(yaw_frame, np.clip(expected, -U_CLIP, U_CLIP), atol=_U_TOL)
+        without = dataclasses.replace(data, **{column: None})
+        with pytest.raises(DpcError, match=f"no {column}"):
+            regression_target(without, scale, "world", "model", model_target=target)
+    assert not np.allclose(data.u_unmodelled, data.u_payload)  # the two targets differ here
+
+
+def test_the_model_target_is_checked():
+    """`RunConfig.model_target`: one of `MODEL_TARGETS`, and only with u_base 'model'."""
+    from dpc_mjx.run.config import RunConfig  # noqa: PLC0415
+
+    model = {"env.u_base": "model"}
+    assert RunConfig().replace(model_target="payload", **model).model_target == "payload"
+    with pytest.raises(DpcError, match="model_target='slow' is not one of"):
+        RunConfig().replace(model_target="slow", **model)
+    with pytest.raises(DpcError, match="needs env.u_base=model"):
+        RunConfig().replace(model_target="payload", **{"env.u_base": "zero"})
 
 
 def _trajectories() -> Dataset:
@@ -217,9 +233,10 @@ _PAYLOAD_KG = 0.3
 
 @pytest.mark.parametrize("payload", [0.0, _PAYLOAD_KG])
 def test_the_unmodelled_wrench_is_the_force_on_the_gripper(payload):
-    """`adapter.data.unmodelled_u` (`Dataset.u_unmodelled`, the 'model' target): zero with no
-    push and no payload, the payload's weight (a force m g at the gripper) with one, while the
-    arm reaches and the robot trots; its torque that force's moment about the base's COM."""
+    """`adapter.data.unmodelled_u` (`Dataset.u_unmodelled`): zero with no push and no payload,
+    the payload's weight (a force m g at the gripper) with one, while the arm reaches and the
+    robot trots; its torque that force's moment about the base's COM. With no push it is
+    `payload_u` (`Dataset.u_payload`, the 'model' target)."""
     env = dpc_mjx.make(
         DEFAULT_TASK,
         arm="regular",
@@ -235,6 +252,9 @@ def test_the_unmodelled_wrench_is_the_force_on_the_gripper(payload):
         weight = np.array([0.0, 0.0, -payload * 9.81])
         np.testing.assert_allclose(u[:, :3], np.tile(weight, (_BATCH, 1)), atol=_UNMODELLED_TOL_F)
         ee = np.asarray(d.site_xpos[:, env.lay.arms[0].ee_site])  # (B, 3) m, world
-        com = np.asarray(jax.vmap(env._com_pos)(d))
+        com = np.asarray(jax.vmap(env.com_pos)(d))
         moment = np.cross(ee - com, weight)
         np.testing.assert_allclose(u[:, 3:], moment, atol=_UNMODELLED_TOL_F)
+        carried = jp.full((_BATCH, 1), payload, jp.float32)  # kg, one arm
+        u_payload = np.asarray(jax.vmap(lambda x, m: payload_u(env, x, m))(d, carried))
+        np.testing.assert_allclose(u_payload, u, atol=_UNMODELLED_TOL_F)

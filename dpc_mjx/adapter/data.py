@@ -9,7 +9,8 @@ arm's effect on the body the policy will later correct; `collect` warns of nothi
 env whose observation is `[s_body, s_arm, p_arm, u_obs]`. Each row also keeps, for the policy's
 regression (`policy.regression`), the observer's estimate u_obs, the oracle's u (privileged), the
 arms' gravity wrench, what the arms' model cannot know (`unmodelled_u`: privileged, one extra
-forward pass per env step) and the heading (to turn u into the yaw frame).
+forward pass per env step), the part of it that is the payloads' weight (`payload_u`:
+privileged) and the heading (to turn u into the yaw frame).
 
 s_drp = (roll rate, pitch rate): the trunk's angular velocity about its own x and y axes (rad/s,
 trunk frame, what an IMU's gyro reads), i.e. s_body[2:4] one env step (20 ms) later.
@@ -34,6 +35,7 @@ from mujoco import mjx
 from dpc_mjx import devices
 from dpc_mjx.control.arm_model import exact_inputs, model_wrench
 from dpc_mjx.control.controller import oracle_u
+from dpc_mjx.control.state import gravity_u
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
@@ -55,6 +57,7 @@ _ROWS = (
     "yaw",
     "u_gravity",
     "u_unmodelled",
+    "u_payload",
 )
 
 
@@ -80,6 +83,10 @@ class Dataset:
     # wrench on the simulator's exact state and accelerations, both of one forward pass
     # (`unmodelled_u`), world
     u_unmodelled: np.ndarray | None = None
+    # (N, 6) privileged: the part of u_unmodelled that the payloads' weight is, a force m g at
+    # each gripper and its moment about the base's COM (`payload_u`), world; the target of DPC
+    # on the model with `RunConfig.model_target` 'payload' (`policy.regression`)
+    u_payload: np.ndarray | None = None
     env_steps: int = 0  # env steps run to collect them (kept + dropped)
     seconds: float = 0.0  # wall time of the collection
 
@@ -118,6 +125,10 @@ class Dataset:
         """(N, 6) what the arms' model cannot know in `frame` ('world', or 'yaw': turned by
         `yaw`)."""
         return self._world_wrench_in("u_unmodelled", frame)
+
+    def u_payload_in(self, frame: str) -> np.ndarray:
+        """(N, 6) the payloads' weight wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
+        return self._world_wrench_in("u_payload", frame)
 
     def _world_wrench_in(self, name: str, frame: str) -> np.ndarray:
         """(N, 6) the world-frame wrench column `name` in `frame` ('world' or 'yaw')."""
@@ -247,6 +258,26 @@ def unmodelled_u(env: DpcEnv, d) -> jax.Array:
     return oracle - model
 
 
+def payload_u(env: DpcEnv, d, payload: jax.Array) -> jax.Array:
+    """(6,) the payloads' weight in one env's data `d`: `payload` (k,) kg, one per arm, each a
+    force m g at its arm's end-effector site, and that force's moment about the base's COM,
+    world (`control.state.gravity_u`; privileged: no robot knows its load). The slow part of
+    `unmodelled_u` (equal to it with no push)."""
+    if not env.lay.arms:
+        return jp.zeros(6)
+    sites = np.array([arm.ee_site for arm in env.lay.arms], int)
+    gravity = jp.asarray(env.model.opt.gravity, jp.float32)
+    return gravity_u(payload, gravity, d.site_xpos[sites], env.com_pos(d))
+
+
+def _wrench_labels(env: DpcEnv, before) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """(u_gravity, u_unmodelled, u_payload), each (B, 6) world, of a batch's state `before`."""
+    d, payload = before.pipeline_state, before.info["dist"].payload  # payload (B, k) kg
+    u_gravity = jax.vmap(env.arm_gravity)(d)
+    u_unmodelled = jax.vmap(lambda x: unmodelled_u(env, x))(d)
+    return u_gravity, u_unmodelled, jax.vmap(lambda x, m: payload_u(env, x, m))(d, payload)
+
+
 def _staggered(state, episode_length: int, burn_in: int, seed: int):
     """`state` (a `wrap_for_training` batch just reset) with env i's episode step counter set so
     that its first episode ends after k_i ~ U{1 .. min(burn_in, episode_length)} steps."""
@@ -285,12 +316,10 @@ def collect(
 
     def record(before, after):  # the obs, its oracle u, heading and the next roll/pitch rates
         u_oracle = before.info["privileged"][:, PRIVILEGED["u_oracle"]]
-        u_gravity = jax.vmap(env.unwrapped.arm_gravity)(before.pipeline_state)  # (B, 6) world
-        u_unmodelled = jax.vmap(lambda d: unmodelled_u(env.unwrapped, d))(before.pipeline_state)
         yaw = roll_pitch_yaw(before.pipeline_state.qpos[:, 3:7])[:, 2]  # (B,) rad
         keep = after.done == 0.0  # the next obs is a successor of obs
         drp = after.obs[:, layout.s_body][:, DRP]
-        return before.obs, u_oracle, yaw, drp, keep, u_gravity, u_unmodelled
+        return before.obs, u_oracle, yaw, drp, keep, *_wrench_labels(env.unwrapped, before)
 
     t0 = time.perf_counter()
     key = jax.random.PRNGKey(seed)  # the chunks' keys reach only the policy
@@ -312,16 +341,17 @@ def collect(
             if i < burn_chunks:  # staggered starts: these rows are dropped
                 pbar.set_postfix_str(f"burn-in {(i + 1) * chunk}/{burn_chunks * chunk} steps")
                 continue
-            obs, u, yaw, drp, keep, grav, unmodelled = (
+            obs, u, yaw, drp, keep, grav, unmodelled, payload = (
                 x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out
             )
-            parts.append(tuple(x[keep] for x in (obs, drp, ids, u, yaw, grav, unmodelled)))
+            columns = (obs, drp, ids, u, yaw, grav, unmodelled, payload)
+            parts.append(tuple(x[keep] for x in columns))
             kept += int(keep.sum())
             pbar.update(min(int(keep.sum()), samples - pbar.n))
             if kept >= samples:
                 break
     columns = (np.concatenate([p[k] for p in parts])[:samples] for k in range(len(parts[0])))
-    obs, drp, env_id, u_oracle, yaw, u_gravity, u_unmodelled = columns  # float32 but env_id (int32)
+    obs, drp, env_id, u_oracle, yaw, u_gravity, u_unmodelled, u_payload = columns  # env_id int32
     return Dataset(
         s_body=obs[:, layout.s_body],
         s_arm=obs[:, layout.s_arm],
@@ -333,6 +363,7 @@ def collect(
         yaw=yaw,
         u_gravity=u_gravity,
         u_unmodelled=u_unmodelled,
+        u_payload=u_payload,
         env_steps=steps,
         seconds=time.perf_counter() - t0,
     )

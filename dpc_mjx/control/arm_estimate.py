@@ -123,6 +123,34 @@ def update(
     )
 
 
+def planned_change(
+    arm: arm_model.ArmModel, s: BodyState, com: jax.Array, targets: jax.Array, dt: float
+) -> jax.Array:
+    """(N, 6) how the arms' model wrench changes along their planned motion, over the MPC's
+    horizon: W_k - W_0 for k = 0 .. N-1 (so row 0 is 0), W_k the model wrench of the arms at
+    their servo targets for t + k dt, moving at those targets' central differences:
+
+        q_k = T_k,  qd_k = (T_{k+1} - T_{k-1}) / (2 dt),  qdd_k = (T_{k+1} - 2 T_k + T_{k-1}) / dt^2
+
+    `targets` (N + 2, n) the servo targets at t + k dt for k = -1 .. N (the arm's planner's;
+    the servos assumed to track them), `dt` s the horizon's step; the base as measured now
+    (`s`: rotation, angular velocity), not accelerating (the MPC plans its motion), `com` (3,)
+    m, world, the base's COM minus the trunk's origin. Added to the present u, the wrench the
+    MPC plans against (`EnvConfig.u_ahead` 'model'): the arm's own motion ahead, not privileged."""
+    q = targets[1:-1]
+    qd = (targets[2:] - targets[:-2]) / (2.0 * dt)
+    qdd = (targets[2:] - 2.0 * targets[1:-1] + targets[:-2]) / dt**2
+    base = arm_model.BaseMotion(
+        rot=s.rot,
+        ang_vel=s.ang_vel,
+        ang_acc=jp.zeros(3),
+        lin_acc=jp.array([0.0, 0.0, GRAVITY]),  # a - g at rest, g = (0, 0, -9.81)
+        com=com,
+    )
+    wrench = jax.vmap(lambda *x: arm_model.model_wrench(arm, base, *x))(q, qd, qdd)  # (N, 6)
+    return wrench - wrench[0]
+
+
 def read_sensors(lay, d, noise: SensorNoise | None) -> tuple[jax.Array, jax.Array, jax.Array]:
     """(accelerometer (3,) m/s^2 trunk frame, arm q (n,), arm qd (n,)) as the robot reads them
     from the data `d`, with the errors `noise` (None: exact)."""
@@ -140,6 +168,7 @@ __all__ = [
     "ArmEstimate",
     "ArmEstimateConfig",
     "init",
+    "planned_change",
     "read_sensors",
     "update",
 ]

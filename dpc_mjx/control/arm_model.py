@@ -29,7 +29,7 @@ a_cj, c_j: body j's COM acceleration and position; I_j its inertia about its COM
 This is the mount wrench MuJoCo's force/torque sensors read (`controller.oracle_u`) when nothing
 but the base and gravity acts on the arms; it misses what no model of the arm knows: forces on
 the gripper (pushes, a payload, a grasped object) and model error. Standing still it is the
-arms' weight and its moment (`controller.gravity_u`). The joint torques of the same motion
+arms' weight and its moment (`state.gravity_u`). The joint torques of the same motion
 (`joint_torques`: each joint's axis against the moment of the bodies beyond it) give the arms'
 mass matrix and, with the servo law, the joint accelerations the servos cause (`servo_qdd`).
 """

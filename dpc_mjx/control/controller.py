@@ -192,22 +192,33 @@ class LowLevelController:
         """(4, 3) m, world: where the feet's forces act, on the ground below each foot's centre."""
         return s.foot_pos.at[:, 2].add(-self.lay.foot_radius)
 
-    def _mpc(self, cs: ControllerState, p: Plan, u, u_ahead, tick):
+    def _mpc(self, cs: ControllerState, p: Plan, u, change, tick):
         """(the MPC's plan, the QP's target acceleration (6,)) of this tick (`mpc.update`):
         re-solved where tick % `MPCConfig.every` == 0 (`tick` None: where the plan is that many
-        ticks old or not valid), for the wrench w_0 .. w_{N-1} `u_ahead` (N, 6) (None: u held)."""
+        ticks old or not valid), for the wrench w_k = u + change[k], k = 0 .. N-1 (`change`
+        (N, 6), `_planned_change`; None: u held)."""
         cfg, plan = self.config.mpc, cs.mpc
         if tick is None:
             replan = (cs.t - plan.t0 >= (cfg.every - 0.5) * self.dt) | ~plan.qp.valid
         else:
             replan = tick % cfg.every == 0
-        wrench = jp.tile(u, (cfg.steps, 1)) if u_ahead is None else u_ahead
+        wrench = jp.tile(u, (cfg.steps, 1)) if change is None else u + change
         desired = (p.pos_des, p.vel_des, p.yaw_des, p.yaw_rate_des)
         feet = self._contact_points(p.state)
         return mpc_lib.update(
             cfg, self.config.balance, self.config.gait, plan, cs.t, p.state, feet, desired,
             wrench, replan,
         )  # fmt: skip
+
+    def _planned_change(self, p: Plan, targets_ahead, add_model):
+        """(N, 6) `arm_estimate.planned_change` along `targets_ahead` where `add_model` (a bool,
+        or a traced () bool per env), else 0; None without targets, arms or the model."""
+        if targets_ahead is None or self.arm is None or add_model is False:
+            return None
+        lever = p.state.rot @ jp.asarray(self.idx.com_offset, jp.float32)  # COM - trunk origin
+        dt = self.config.mpc.dt
+        change = arm_estimate_lib.planned_change(self.arm, p.state, lever, targets_ahead, dt)
+        return jp.where(add_model, change, 0.0)
 
     def swing_legs(self, cs: ControllerState, p: Plan) -> tuple[jax.Array, jax.Array]:
         """The swing feet of this tick: (4, 3) m, world, each foot's position at its last
@@ -244,7 +255,7 @@ class LowLevelController:
         noise: sensors.SensorNoise | None = None,
         add_estimate: bool | jax.Array = False,
         add_model: bool | jax.Array = False,
-        u_ahead: jax.Array | None = None,
+        targets_ahead: jax.Array | None = None,
         tick: int | jax.Array | None = None,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
@@ -257,7 +268,9 @@ class LowLevelController:
         `add_estimate` too the observer estimates what the model leaves (the model wrench is
         then among its known wrenches); `noise` the measurement errors of this tick
         (`control/sensors.py`; None: exact sensors). With the MPC as the low level
-        (`ControllerConfig.mpc`): `u_ahead` (N, 6) the wrench over its horizon (None: u held);
+        (`ControllerConfig.mpc`): `targets_ahead` (N + 2, n) the arms' servo targets over its
+        horizon (`arm_estimate.planned_change`): with `add_model` it plans against u plus the
+        model wrench's change along them (None: u held);
         `tick` () int, this tick's index in a sequence the whole batch shares (an env step's
         ticks), which times the re-solves as a cond that runs one branch (None: the plan's age
         times them, per env: under vmap both branches run at every tick; `_mpc`).
@@ -284,7 +297,8 @@ class LowLevelController:
             u = jp.where(add_model, u + arm.wrench, u)
         plan, qdd = cs.mpc, None
         if self.config.mpc is not None:
-            plan, qdd = self._mpc(cs, p, u, u_ahead, tick)
+            change = self._planned_change(p, targets_ahead, add_model)
+            plan, qdd = self._mpc(cs, p, u, change, tick)
         prob = self.balance_qp(p, u, qdd)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
@@ -366,22 +380,11 @@ def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
     return jp.concatenate([f_a, tau_a])
 
 
-def gravity_u(masses: jax.Array, gravity: jax.Array, coms: jax.Array, com_pos: jax.Array):
-    """(6,) u = sum over bodies b of [m_b g, (c_b - c) x m_b g] (N, N·m; world frame): the
-    weight of the bodies `masses` (n_b,) kg at their COMs `coms` (n_b, 3) m and its torque about
-    `com_pos` (3,) m, under `gravity` (3,) m/s^2. For the arm bodies at their simulated pose, the
-    static part of the mount wrench that `oracle_u` measures (the arm encoders' 0.001 rad and
-    the IMU's attitude error are not applied to it)."""
-    weight = masses[:, None] * gravity  # (n_b, 3) N
-    return jp.concatenate([weight.sum(0), jp.cross(coms - com_pos, weight).sum(0)])
-
-
 __all__ = [
     "BodyState",
     "ControllerConfig",
     "ControllerState",
     "LowLevelController",
-    "gravity_u",
     "make_controller",
     "oracle_u",
 ]

@@ -1,7 +1,9 @@
 """The body state the low-level controller sees, read from MJX data (privileged, noise-free).
 
 Frames: world (z up). Data fields read after `mjx.step` mix the new qvel with kinematics of the
-previous step (positions are 4 ms old), as a real sensor pipeline would.
+previous step (positions are 4 ms old), as a real sensor pipeline would. Also the weights the
+controllers count as known, as wrenches about the base's COM (`legs_weight_wrench`,
+`gravity_u`).
 """
 
 from __future__ import annotations
@@ -154,3 +156,13 @@ def legs_weight_wrench(idx: StateIndex, d, s: BodyState, stance: jax.Array, foot
     extra = extra * stance[:, None]
     contact = s.foot_pos.at[:, 2].add(-foot_radius)
     return jp.concatenate([extra.sum(0), jp.cross(contact - s.com_pos, extra).sum(0)])
+
+
+def gravity_u(masses: jax.Array, gravity: jax.Array, coms: jax.Array, com_pos: jax.Array):
+    """(6,) u = sum over bodies b of [m_b g, (c_b - c) x m_b g] (N, N·m; world frame): the
+    weight of the bodies `masses` (n_b,) kg at their COMs `coms` (n_b, 3) m and its torque about
+    `com_pos` (3,) m, under `gravity` (3,) m/s^2. For the arm bodies at their simulated pose, the
+    static part of the mount wrench that `oracle_u` measures (the arm encoders' 0.001 rad and
+    the IMU's attitude error are not applied to it)."""
+    weight = masses[:, None] * gravity  # (n_b, 3) N
+    return jp.concatenate([weight.sum(0), jp.cross(coms - com_pos, weight).sum(0)])

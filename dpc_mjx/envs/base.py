@@ -62,14 +62,13 @@ from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
-from dpc_mjx.control.controller import gravity_u, make_controller, oracle_u
-from dpc_mjx.control.state import has_fallen
+from dpc_mjx.control.controller import make_controller, oracle_u
+from dpc_mjx.control.state import gravity_u, has_fallen
 from dpc_mjx.controllers import Controller
 from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, ee_wrench, make_sampler
 from dpc_mjx.envs.outcome import METRICS
-from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import make_physics, resolve_engine
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
@@ -91,14 +90,7 @@ class DpcEnv(Env):
         self.model = self.build_model(on_base(resolve(arm), config.base))
         # 'auto' -> the engine that runs (`physics.resolve_engine`), so config.engine names it
         self.config = config = config.replace(engine=resolve_engine(config.engine, self.model))
-        timestep = float(self.model.opt.timestep)
-        n_sub = round(config.policy_dt / timestep)
-        if n_sub < 1 or abs(n_sub * timestep - config.policy_dt) > 1e-9:
-            raise DpcError(
-                f"policy_dt={config.policy_dt} s must be a whole multiple of the physics step "
-                f"{timestep} s (e.g. {5 * timestep:g} s for 50 Hz)."
-            )
-        self.n_substeps = n_sub
+        self.n_substeps = config.substeps(float(self.model.opt.timestep))
         self.lay = layout(self.model)
         self.mx = sim.put_model(self.model)
         self.physics = make_physics(config.engine, self.model, self.mx)
@@ -298,9 +290,13 @@ class DpcEnv(Env):
             (d, cs, queue, _), (i, tick_key) = carry, xs
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
             u, add, model = self.controller_u(d, u_policy, info.get("controller"))
-            targets = self.arm_targets(dist, d.time, d)
+            targets, ahead = self.arm_targets(dist, d.time, d), None
+            if self.config.u_ahead == "model":  # the servo targets over the MPC's horizon
+                mpc = self.controller.config.mpc
+                times = d.time + mpc.dt * jp.arange(-1, mpc.steps + 1)  # (N + 2,) s
+                ahead = jax.vmap(lambda t: self.arm_targets(dist, t, d))(times)
             cs, ctrl = self.controller.step(
-                cs, d, command, u, targets, noise, add_estimate=add, add_model=model, tick=i
+                cs, d, command, u, targets, noise, add, model, targets_ahead=ahead, tick=i
             )
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
@@ -353,13 +349,13 @@ class DpcEnv(Env):
 
     def arm_gravity(self, d) -> jax.Array:
         """(6,) world frame: the arms' weight and its torque about the base's COM at this tick's
-        pose, from the arm file's masses (`control.controller.gravity_u`; `u_base` 'gravity')."""
+        pose, from the arm file's masses (`control.state.gravity_u`; `u_base` 'gravity')."""
         gravity = jp.asarray(self.model.opt.gravity, jp.float32)  # (3,) m/s^2, world
-        return gravity_u(self._arm_masses, gravity, d.xipos[self.lay.arm_bodies], self._com_pos(d))
+        return gravity_u(self._arm_masses, gravity, d.xipos[self.lay.arm_bodies], self.com_pos(d))
 
     def _oracle(self, d) -> jax.Array:
         """(6,) the measured arm-mount wrench about the base's COM (world frame)."""
-        return oracle_u(self.lay, d, self._com_pos(d))
+        return oracle_u(self.lay, d, self.com_pos(d))
 
     # helpers --------------------------------------------------------------------------------
 
@@ -385,7 +381,7 @@ class DpcEnv(Env):
         """() rad, the trunk's heading."""
         return yaw_of(d.xmat[self.controller.idx.trunk])
 
-    def _com_pos(self, d) -> jax.Array:
+    def com_pos(self, d) -> jax.Array:
         """(3,) m, world: the base (trunk + legs) COM, as the controller sees it."""
         idx = self.controller.idx
         offset = jp.asarray(idx.com_offset, jp.float32)

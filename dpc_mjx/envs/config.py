@@ -37,6 +37,7 @@ from dpc_mjx.envs.checks import (
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import ENGINE_CHOICES
 
+U_AHEAD = ("held", "model")  # `EnvConfig.u_ahead`
 CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
 # what DPC's policy u is added to (`EnvConfig.u_base`)
@@ -98,6 +99,10 @@ class EnvConfig:
     # The low level under every controller: 'qp' (the one-tick balance QP, `control/balance.py`)
     # or 'mpc' (the convex MPC over a horizon, the QP tracking its plan: `control/mpc.py`)
     low_level: str = "qp"
+    # With low_level 'mpc', the arms' wrench over its horizon: 'held' (the present u) or 'model'
+    # (the present u plus the arms' model wrench's change along their servo targets ahead, for
+    # the controllers that add the model wrench: `arm_estimate.planned_change`; not privileged)
+    u_ahead: str = "held"
     # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device), 'native' (MuJoCo C on
     # the same model, on the host: the faster path on a CPU, and sim-to-sim) or 'auto' (native
     # on one CPU device, MJX on an accelerator: `physics.resolve_engine`); a built env's
@@ -274,12 +279,31 @@ class EnvConfig:
         out.validate()
         return out
 
+    def substeps(self, timestep: float) -> int:
+        """Physics steps of `timestep` s per env step (`policy_dt`); `DpcError` unless whole."""
+        n_sub = round(self.policy_dt / timestep)
+        if n_sub < 1 or abs(n_sub * timestep - self.policy_dt) > 1e-9:
+            raise DpcError(
+                f"policy_dt={self.policy_dt} s must be a whole multiple of the physics step "
+                f"{timestep} s (e.g. {5 * timestep:g} s for 50 Hz)."
+            )
+        return n_sub
+
+    def _validate_u_ahead(self) -> None:
+        check_choice("u_ahead", self.u_ahead, U_AHEAD)
+        if self.u_ahead != "held" and self.low_level != "mpc":
+            raise DpcError(
+                f"u_ahead={self.u_ahead!r} plans the arms' wrench over the MPC's horizon: it "
+                "needs low_level='mpc' (or u_ahead='held')."
+            )
+
     def validate(self) -> None:
         """Raise `DpcError` naming the first invalid field and what it must be."""
         Controller.parse(self.controller)
         check_choice("gait", self.gait, GAITS)
         check_choice("engine", self.engine, ENGINE_CHOICES)
         check_choice("low_level", self.low_level, LOW_LEVELS)
+        self._validate_u_ahead()
         _policy_u(self.u_frame, self.u_base)
         if not isinstance(self.base, str) or not self.base:
             raise DpcError(

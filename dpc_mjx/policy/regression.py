@@ -17,7 +17,8 @@ u_oracle - u_obs, the part of u the observer's estimate misses, in the same fram
 'gravity' u_oracle - u_gravity, the part the arms' weight at their pose leaves, and
 with 'model' u_unmodelled, what the arms' model cannot know (the oracle's u minus the model
 wrench on the simulator's exact state and accelerations: the pushes and the payload as the mount
-feels them; privileged labels, `Dataset.u_unmodelled`), and
+feels them; privileged labels, `Dataset.u_unmodelled`; with `model_target` 'payload' only its
+slow part, the payloads' weight, `Dataset.u_payload`), and
 with `slow_s` > 0 only its fast part: minus its exponential average over `slow_s` seconds along
 each episode, `regression_target`); the
 observation statistics start from the same samples. The last `val_fraction` of the samples are
@@ -54,6 +55,17 @@ REGRESSION_TARGETS = {
     "gravity": "u_oracle - u_gravity",
     "model": "u_unmodelled (u_oracle - the model wrench on the exact state)",
 }
+# What of the unmodelled wrench u_base 'model' learns (`RunConfig.model_target`)
+MODEL_TARGETS = {
+    "unmodelled": REGRESSION_TARGETS["model"],
+    "payload": "u_payload (the payloads' weight at the grippers and its moment)",
+}
+
+
+def target_name(u_base: str, model_target: str = "unmodelled") -> str:
+    """What the actor is fitted to, in words, for `EnvConfig.u_base` and `model_target`."""
+    return MODEL_TARGETS[model_target] if u_base == "model" else REGRESSION_TARGETS[u_base]
+
 
 # `trainer` is SAC's (`sac.trainer.Trainer`, `Carry`), taken by what it has, so that this layer
 # imports no SAC: trainer.observation_size, .critic_observation_size, .action_size,
@@ -75,6 +87,7 @@ def regress_actor(
     u_base: str = "zero",
     slow_s: float | tuple[float, float] = 0.0,
     step_s: float = 0.02,
+    model_target: str = "unmodelled",
     epochs: int = 30,
     patience: int = 5,
     batch_size: int = 256,
@@ -86,11 +99,12 @@ def regress_actor(
     """`carry` with its actor and observation statistics fitted to the oracle's u on `data`
     (in `u_frame`, the env's `EnvConfig.u_frame`; with `u_base` 'observer' the residual
     u_oracle - u_obs, `EnvConfig.u_base`, its fast part with `slow_s` > 0; `step_s` s between
-    a row and the next of its episode, the env step), and a report {'r2': per u component on
-    held-out samples, 'val_mse', 'samples'}."""
+    a row and the next of its episode, the env step; `model_target` with u_base 'model'), and a
+    report {'r2': per u component on held-out samples, 'val_mse', 'samples'}."""
     _check_trainer(trainer, adapter_config)
     # (N, 6) over the whole data (the slow part runs along episodes), then split as the rows
-    target = jp.asarray(regression_target(data, u_scale, u_frame, u_base, slow_s, step_s))
+    target = regression_target(data, u_scale, u_frame, u_base, slow_s, step_s, model_target)
+    target = jp.asarray(target)
 
     def arrays(part: Dataset, rows: slice) -> tuple[jax.Array, jax.Array]:
         """(obs (N, observation_size) the policy's, target (N, 6) in action units)."""
@@ -139,6 +153,7 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
     u_base: str,
     slow_s: float | tuple[float, float] = 0.0,
     step_s: float = 0.02,
+    model_target: str = "unmodelled",
 ) -> np.ndarray:
     """(N, 6) what the actor's mean action is fitted to, in action units: clip(u / u_scale,
     -U_CLIP, U_CLIP) with u = u_oracle in `u_frame`, minus the observer's estimate u_obs (the
@@ -147,7 +162,9 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
     cannot know (`Dataset.u_unmodelled`) where it is 'model': not u_oracle minus the model
     wrench the controller computes, whose difference also holds the arms' reaction to the
     trunk's actual acceleration, which the controller leaves to the balance QP on purpose (a
-    policy that learns it feeds it back an env step late: docs/results-arm-model.md). With
+    policy that learns it feeds it back an env step late: docs/results-arm-model.md); with
+    `model_target` 'payload' only the payloads' weight wrench (`Dataset.u_payload`), its slow
+    part, leaving the pushes to the balance QP's feedback (`MODEL_TARGETS`). With
     `slow_s` > 0 (s; one
     number, or (force, torque) where 0 keeps that part whole; u_base 'observer' only) the
     residual d = u_oracle - u_obs loses its slow part, its exponential average along each
@@ -166,6 +183,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
         raise DpcError("slow_s splits the observer's residual: it needs u_base='observer'.")
     elif u_base == "gravity":  # what the arms' weight at their pose leaves
         u = u - data.u_gravity_in(u_frame)
+    elif u_base == "model" and model_target == "payload":  # its slow part (privileged labels)
+        u = data.u_payload_in(u_frame)
     elif u_base == "model":  # what the arms' model cannot know (privileged labels)
         u = data.u_unmodelled_in(u_frame)
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)

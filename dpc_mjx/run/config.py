@@ -22,6 +22,7 @@ from dpc_mjx.controllers import Controller
 from dpc_mjx.envs.config import check_number_or_pair
 from dpc_mjx.envs.registry import DEFAULT_TASK, get_config
 from dpc_mjx.errors import DpcError
+from dpc_mjx.policy.regression import MODEL_TARGETS
 from dpc_mjx.robots.arms.family import ArmFamily
 from dpc_mjx.robots.variants import resolve
 from dpc_mjx.serialization import jsonable, read_json, tuples, write_json
@@ -160,6 +161,11 @@ class RunConfig:
     # episode), so that the observer keeps the slow part, its integral action on the legs' model
     # error included; 0: the whole residual (`policy.regression.regression_target`)
     residual_slow_s: float | tuple[float, float] = 0.0
+    # With env.u_base='model': what of the unmodelled wrench the regression fits
+    # (`policy.regression.MODEL_TARGETS`): 'unmodelled' (the shipped form: the pushes and the
+    # payload as the mount feels them) or 'payload' (the payloads' weight alone, the part that
+    # pays where it is known exactly: docs/results-arm-model.md, "The bounds")
+    model_target: str = "unmodelled"
     # the run's one seed; `adapter.seed` and `sac.seed` follow it (the module's docstring)
     seed: int = 0
 
@@ -222,6 +228,15 @@ class RunConfig:
     def _validate_residual(self) -> None:
         check_number_or_pair("RunConfig.residual_slow_s (s)", self.residual_slow_s, 0.0, 60.0)
         u_base = get_config(self.task, **self.env_overrides).u_base
+        if self.model_target not in MODEL_TARGETS:
+            raise DpcError(
+                f"RunConfig.model_target={self.model_target!r} is not one of {list(MODEL_TARGETS)}."
+            )
+        if self.model_target != "unmodelled" and u_base != "model":
+            raise DpcError(
+                "model_target chooses what DPC on the arms' model learns: it needs "
+                "env.u_base=model (`--set env.u_base=model`), or model_target=unmodelled."
+            )
         if self.splits_residual and u_base != "observer":
             raise DpcError(
                 "residual_slow_s splits the residual u_oracle - u_obs: it needs "

@@ -1,6 +1,6 @@
 """The demo (`make demo`, `dpc-mjx demo`): a small DPC run end to end on the default arm, then an
-MBC-vs-DPC line; and `run_variants` (`dpc-mjx variants`): every arm variant built and stood in
-MJX, with a table of DOF, masses and MJX steps/s."""
+MBC / observer / feedforward / DPC line; and `run_variants` (`dpc-mjx variants`): every arm
+variant built and stood in MJX, with a table of DOF, masses and MJX steps/s."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from dpc_mjx.robots.layout import layout
 from dpc_mjx.robots.standing import home_ctrl, perturbed_home, with_leg_servos
 from dpc_mjx.rotations import roll_pitch_yaw
 from dpc_mjx.run.bench import time_calls
-from dpc_mjx.run.config import RunConfig
+from dpc_mjx.run.config import RECIPES, RunConfig
 from dpc_mjx.run.pipeline import train_and_evaluate
 
 
@@ -88,16 +88,22 @@ def run_variants(variants=tuple(VARIANTS), batch: int = 16, seconds: float = 1.0
     return rows
 
 
-# The shipped run's recipe (`RunConfig`'s defaults: random-motion data, the adapter, the actor
-# regressed on the oracle's u on [s_body, z], no SAC stage) on a budget that runs in a few
-# minutes on a 2-core CPU: a fifth of the shipped run's samples and a sixteenth of its
-# evaluation (docs/results.md). `quick` is a smoke run of the same stages.
-DEMO = {
+# The shipped run's recipe (`RECIPES["default"]`: random-motion data, the adapter, the actor
+# regressed on what the arms' model cannot know on [s_body, z], added to the model wrench, no
+# SAC stage) on a budget that runs in a few minutes on a 2-core CPU: a fifth of the shipped
+# run's samples and a sixteenth of its evaluation (docs/results.md), beside MBC, the observer
+# and the feedforward. `quick` is a smoke run of the same stages.
+DEMO = RECIPES["default"] | {
     "samples": 20_000,
     "adapter.epochs": 20,
     "eval_episodes": 16,
     "eval_steps": 500,
-    "eval_controllers": (Controller.MBC, Controller.OBSERVER, Controller.DPC),
+    "eval_controllers": (
+        Controller.MBC,
+        Controller.OBSERVER,
+        Controller.FEEDFORWARD,
+        Controller.DPC,
+    ),
 }
 QUICK = DEMO | {
     "samples": 4096,
@@ -124,13 +130,13 @@ def run_demo(quick: bool = False, run_dir: str | None = None, engine: str | None
     t0 = time.perf_counter()
     summary = train_and_evaluate(config, run)
     cells = {c["controller"]: c for c in summary["eval"]}
-    mbc, observer, dpc = (cells[c] for c in DEMO["eval_controllers"])
-    n = mbc["episodes"]
+    shown = [cells[c] for c in DEMO["eval_controllers"]]
+    n, seconds = shown[0]["episodes"], shown[0]["steps"] * 0.02
+    falls = " / ".join(f"{c['falls'] / n:.2f}" for c in shown)
+    returns = " / ".join(f"{c['mean_return']:.1f}" for c in shown)
     print(
-        f"\nMBC / observer / DPC ({config.arm}, {n} episodes of {mbc['steps'] * 0.02:g} s): "
-        f"fall rate {mbc['falls'] / n:.2f} / {observer['falls'] / n:.2f} / "
-        f"{dpc['falls'] / n:.2f}, mean return {mbc['mean_return']:.1f} / "
-        f"{observer['mean_return']:.1f} / {dpc['mean_return']:.1f} "
+        f"\nMBC / observer / feedforward / DPC ({config.arm}, {n} episodes of {seconds:g} s): "
+        f"fall rate {falls}, mean return {returns} "
         f"(demo budget, {engine} engine; the shipped run is in docs/results.md). "
         f"Wall time {time.perf_counter() - t0:.0f} s.",
         flush=True,

@@ -38,7 +38,7 @@ from dpc_mjx.io.shipped import (  # noqa: F401 (SHIPPED, SHIPPED_PAPER: their ol
     env_overrides,
     export_cells,
 )
-from dpc_mjx.policy.regression import REGRESSION_TARGETS, regress_actor
+from dpc_mjx.policy.regression import regress_actor, target_name
 from dpc_mjx.robots.spec_json import arm_argument
 from dpc_mjx.robots.variants import Arm, arm_name
 from dpc_mjx.run import plots
@@ -244,10 +244,11 @@ def _oracle_regression(config: RunConfig, run_dir: pathlib.Path, adapter, env_co
                 u_base=env_config.u_base,
                 slow_s=config.residual_slow_s,
                 step_s=env_config.policy_dt,
+                model_target=config.model_target,
                 seed=config.seed,
             )
             reports.append(report)
-            target = REGRESSION_TARGETS[env_config.u_base]
+            target = target_name(env_config.u_base, config.model_target)
             slow = f" less its slow part ({config.residual_slow_s} s)" * config.splits_residual
             r2 = ", ".join("constant" if v is None else f"{v:.2f}" for v in report["r2"])
             print(

@@ -1,0 +1,110 @@
+"""The arms' wrench over the MPC's horizon (`EnvConfig.u_ahead`): the arms' model wrench's change
+along their servo targets ahead (`arm_estimate.planned_change`), added to the present u of the
+controllers that add the model wrench.
+
+The change is referenced against MuJoCo C: along a slow move (velocities and accelerations near
+zero) it is the change of the arms' weight and its moment about the base's COM at the targets'
+poses (`mj_kinematics`, `state.gravity_u`). In an env, the plan's wrench sequence
+(`MPCPlan.wrench`) varies along the horizon for the feedforward while the arm reaches, and is
+held for MBC, in one batch.
+"""
+
+from __future__ import annotations
+
+import types
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+from helpers import fast_jit
+
+from dpc_mjx import DpcError, make
+from dpc_mjx.control.arm_estimate import planned_change
+from dpc_mjx.control.arm_model import arm_model
+from dpc_mjx.control.state import gravity_u, state_index
+from dpc_mjx.envs.controller_batch import ControllerBatch
+from dpc_mjx.robots import build
+from dpc_mjx.robots.layout import layout
+
+N = 10  # the MPC's steps
+_SLOW_DT = 10.0  # s between the targets' steps: velocities ~1e-3 rad/s, accelerations ~1e-5
+_SLOW_TOL = 2e-3  # N and N·m: float32 sums over the arm's bodies, and the slow move's dynamics
+SEED = 11  # chose nothing
+
+
+def _still(model, lay):
+    """(the home key's kinematics, the base as `planned_change` reads it, its COM lever)."""
+    d = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, d, 0)
+    mujoco.mj_kinematics(model, d)
+    rot = jp.asarray(d.xmat[lay.trunk].reshape(3, 3), jp.float32)
+    lever = rot @ jp.asarray(state_index(model, lay).com_offset, jp.float32)
+    return d, types.SimpleNamespace(rot=rot, ang_vel=jp.zeros(3)), lever
+
+
+@pytest.mark.parametrize("name", ["regular", "z1"])
+def test_along_a_slow_move_the_change_is_the_weights_moment(name):
+    model = build(name)
+    lay = layout(model)
+    d, s, lever = _still(model, lay)
+    q0 = d.qpos[lay.arm_qpos].copy()
+    move = np.zeros_like(q0)
+    move[:2] = (0.6, -0.5)  # rad: the first two joints (a waist and a shoulder)
+    # (N + 2, n): the targets at k = -1 .. N, a straight line from q0
+    targets = q0 + np.linspace(-1.0, N, N + 2)[:, None] / N * move
+    change = np.asarray(planned_change(arm_model(model, lay), s, lever, targets, _SLOW_DT))
+    masses = jp.asarray(model.body_mass[lay.arm_bodies], jp.float32)
+    gravity = jp.asarray(model.opt.gravity, jp.float32)
+    com = jp.asarray(d.xpos[lay.trunk]) + lever
+    weights = []
+    for q in targets[1:-1]:
+        d.qpos[lay.arm_qpos] = q
+        mujoco.mj_kinematics(model, d)
+        weights.append(gravity_u(masses, gravity, jp.asarray(d.xipos[lay.arm_bodies]), com))
+    want = np.asarray(weights) - np.asarray(weights[0])
+    assert np.abs(want[:, 3:]).max() > 0.1  # N·m: the move does shift the arm's weight
+    np.testing.assert_allclose(change, want, atol=_SLOW_TOL)
+
+
+def test_held_targets_change_nothing():
+    model = build("regular")
+    lay = layout(model)
+    d, s, lever = _still(model, lay)
+    targets = np.tile(d.qpos[lay.arm_qpos], (N + 2, 1))
+    change = planned_change(arm_model(model, lay), s, lever, targets, 0.03)
+    np.testing.assert_allclose(change, 0.0, atol=1e-6)
+
+
+def test_u_ahead_is_an_env_option_with_a_clear_error():
+    with pytest.raises(DpcError, match="needs low_level='mpc'"):
+        make("reaching", arm="regular", u_ahead="model")
+    with pytest.raises(DpcError, match="u_ahead"):
+        make("reaching", arm="regular", low_level="mpc", u_ahead="replay")
+
+
+def test_the_feedforward_plans_along_the_arms_targets(monkeypatch):
+    """One batch, MBC and the feedforward on the MPC with u_ahead 'model', 25 env steps of the
+    reaching task: the feedforward's planned wrench varies along the horizon while the arm moves
+    (MBC's is held, its u 0), every output is finite, and nobody falls."""
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: 4 envs, 25 steps
+    env = make(
+        "reaching", arm="regular", engine="native", low_level="mpc", u_ahead="model",
+        controller="dpc", push_force=(0.0, 0.0),
+    )  # fmt: skip
+    batch = ControllerBatch(env, ["mbc", "feedforward"])
+    keys = jax.random.split(jax.random.PRNGKey(SEED), 4)
+    state = jax.jit(batch.reset)(keys)  # the whole batch (`ControllerBatch.batched`)
+    step = jax.jit(batch.step)
+    spread = np.zeros(4)  # N and N·m: the largest change of a plan's wrench along its horizon
+    for _ in range(25):
+        state = step(state, jp.zeros((4, 6)))
+        wrench = np.asarray(state.info["ctrl"].mpc.wrench)  # (4, N, 6)
+        assert np.isfinite(wrench).all() and np.isfinite(np.asarray(state.obs)).all()
+        spread = np.maximum(spread, np.abs(wrench - wrench[:, :1]).max(axis=(1, 2)))
+        assert not np.asarray(state.done).any()
+    mbc = np.asarray(state.info["controller"]) == 0
+    assert mbc.any() and (~mbc).any()
+    np.testing.assert_allclose(spread[mbc], 0.0, atol=1e-6)  # held
+    assert (spread[~mbc] > 0.05).all(), spread  # N, N·m: the arm's planned motion
