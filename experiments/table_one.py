@@ -19,8 +19,8 @@ Every cell runs every controller (`Controller`: MBC, the observer, the feedforwa
 feedforward observer, DPC and the oracle, privileged: the measured arm wrench) on
 the same `--episodes` episodes of each task's default config (seeds `--seed`..: say in the docs
 that they chose nothing), for the task's episode length. Writes, per cell, the evaluation's
-markdown and per-episode CSV to `--out`, and prints a summary: fall rate and return per
-controller, DPC - MBC paired on the same episodes, and the task's measures.
+markdown and per-episode CSV to `--out`, and prints a summary: per controller the fall rate and
+the return [95% CI], DPC - MBC paired on the same episodes, and the task's measures [95% CI].
 """
 
 from __future__ import annotations
@@ -45,12 +45,12 @@ _NAMES = " | ".join(
     "oracle (privileged)" if c is Controller.ORACLE else c.value for c in CONTROLLERS
 )
 HEADER = (
-    f"| task / arm | paper's row | {_NAMES} (each: fall rate, return [95% CI]) "
+    f"| task / arm | paper's row | {_NAMES} "
     "| DPC - MBC return, paired [95% CI] | DPC - MBC fall rate, paired [95% CI] |\n"
     f"|{'---|' * (len(CONTROLLERS) + 4)}"
 )
 MEASURE_HEADER = (
-    f"| task / arm | measure (per episode) | {_NAMES} (each [95% CI]) "
+    f"| task / arm | measure (per episode) | {_NAMES} "
     "| DPC - MBC, paired [95% CI] | oracle - MBC, paired [95% CI] |\n"
     f"|{'---|' * (len(CONTROLLERS) + 4)}"
 )
