@@ -10,6 +10,8 @@ test-all` runs every named base with and without an arm, and a short MJX run.
 
 from __future__ import annotations
 
+import types
+
 import jax
 import jax.numpy as jp
 import mujoco
@@ -241,3 +243,37 @@ def test_an_abused_env_gives_nothing_non_finite(low_level, monkeypatch):
         ee_force = np.asarray(state.info["privileged"])[:, PRIVILEGED["ee_force"]]
         push = max(push, float(np.linalg.norm(ee_force, axis=1).max()))
     assert push >= 2900.0, push  # the pushes did reach the envs
+
+
+_TRACK_TOL = 1e-4  # m/s^2: float32, one 6-vector of sums
+
+
+def test_between_solves_the_qp_tracks_the_plans_predicted_state():
+    """`tracked_acceleration`: on the state the plan predicts it is the plan's own acceleration
+    (its forces' and wrench's, no feedback); off it by dz in height, eq. 9's feedback adds
+    -Kp_z dz, and by dv in vertical velocity -Kd_z dv (the balance QP's gains)."""
+    rng = np.random.default_rng(SEED)
+    states = jp.asarray(rng.normal(0.0, 0.05, (N + 1, 12)), jp.float32).at[:, 5].add(0.26)
+    plan = mpc.MPCPlan.zeros(CONFIG).replace(
+        forces=jp.asarray(rng.uniform(0.0, 40.0, (N, 4, 3)), jp.float32), states=states
+    )
+    feet = jp.asarray(
+        [[0.18, -0.13, 0.0], [0.18, 0.13, 0.0], [-0.18, -0.13, 0.0], [-0.18, 0.13, 0.0]]
+    )
+    t = 1.5 * CONFIG.dt  # halfway through step 1
+    x = states[1] + 0.5 * (states[2] - states[1])  # what the plan predicts at t
+
+    def tracked(dz=0.0, dv=0.0):
+        s = types.SimpleNamespace(
+            com_pos=x[3:6].at[2].add(dz), com_vel=x[9:12].at[2].add(dv),
+            rot=mpc.euler_matrix(x[0:3]), ang_vel=x[6:9],
+        )  # fmt: skip
+        return np.asarray(mpc.tracked_acceleration(CONFIG, PARAMS, plan, t, s, feet))
+
+    on = tracked()
+    M, _ = balance.wrench_matrix(PARAMS, x[3:6], mpc.euler_matrix(x[0:3]), feet, jp.ones(4, bool))
+    planned = np.asarray(M @ plan.forces[1].reshape(-1)) - [0, 0, balance.GRAVITY, 0, 0, 0]
+    np.testing.assert_allclose(on, planned, atol=_TRACK_TOL)
+    kp, kd = np.asarray(PARAMS.kp), np.asarray(PARAMS.kd)
+    np.testing.assert_allclose(tracked(dz=0.01)[2] - on[2], -kp[2] * 0.01, atol=_TRACK_TOL)
+    np.testing.assert_allclose(tracked(dv=0.1)[2] - on[2], -kd[2] * 0.1, atol=_TRACK_TOL)
