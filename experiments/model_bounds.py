@@ -37,7 +37,6 @@ from mujoco import mjx
 from dpc_mjx import io
 from dpc_mjx.control.arm_model import exact_inputs, servo_motion
 from dpc_mjx.control.controller import oracle_u
-from dpc_mjx.envs.disturbances import GRAVITY
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate_env, table_row
@@ -60,13 +59,13 @@ def bounded(env, part: str, tau: float = 0.1):
             if part == "felt":
                 return felt_u(self, d)
             dist, yaw = self._dist, self._yaw(d)
-            weight = jp.zeros((self.sampler.n_arms, 3)).at[:, 2].set(-GRAVITY * dist.payload)
+            weight = self.sampler.payload_weights(dist)
             push = self.sampler.pushes(dist, d.time, yaw)
             ramp = 1.0 - jp.exp(-jp.maximum(d.time - dist.push_on, 0.0) / tau)  # (k,)
             ramped = weight + push * ramp[:, None]
             forces = {"all": push + weight, "payload": weight, "push": push, "ramped": ramped}
             forces = forces[part]  # (k, 3) N
-            lever = d.site_xpos[self._ee_sites] - self.com_pos(d)  # (k, 3) m, world
+            lever = d.site_xpos[self.ee_sites] - self.com_pos(d)  # (k, 3) m, world
             return jp.concatenate([forces.sum(0), jp.cross(lever, forces).sum(0)])
 
     env.__class__ = Bound

@@ -97,7 +97,7 @@ def test_the_end_effector_error_is_the_forward_kinematics_to_first_order(arm):
     moved.qpos[:] = data.qpos
     moved.qpos[qadr] = targets
     mujoco.mj_kinematics(model, moved)
-    shift = moved.site_xpos[env._ee_sites] - data.site_xpos[env._ee_sites]  # (k, 3) m
+    shift = moved.site_xpos[env.ee_sites] - data.site_xpos[env.ee_sites]  # (k, 3) m
     want = float(np.mean(np.sum(shift**2, axis=1)))
     assert want > 1e-5  # the motion is not lost in the tolerance
     assert got == pytest.approx(want, rel=_FIRST_ORDER_TOL)

@@ -265,9 +265,8 @@ def payload_u(env: DpcEnv, d, payload: jax.Array) -> jax.Array:
     `unmodelled_u` (equal to it with no push)."""
     if not env.lay.arms:
         return jp.zeros(6)
-    sites = np.array([arm.ee_site for arm in env.lay.arms], int)
     gravity = jp.asarray(env.model.opt.gravity, jp.float32)
-    return gravity_u(payload, gravity, d.site_xpos[sites], env.com_pos(d))
+    return gravity_u(payload, gravity, d.site_xpos[env.ee_sites], env.com_pos(d))
 
 
 def _wrench_labels(env: DpcEnv, before) -> tuple[jax.Array, jax.Array, jax.Array]:

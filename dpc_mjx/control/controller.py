@@ -129,7 +129,7 @@ class LowLevelController:
             return cs.arm
         s = p.state
         measured = arm_estimate_lib.read_sensors(self.lay, d, noise)
-        lever = s.rot @ jp.asarray(self.idx.com_offset, jp.float32)  # base COM - trunk origin
+        lever = self._com_lever(s)
         state = (s.com_pos, s.com_vel, s.rot, s.ang_vel)
         desired = balance.desired_acceleration(self.config.balance, state, _desired_state(p))
         config = self.config.arm_estimate
@@ -192,17 +192,21 @@ class LowLevelController:
         """(4, 3) m, world: where the feet's forces act, on the ground below each foot's centre."""
         return s.foot_pos.at[:, 2].add(-self.lay.foot_radius)
 
-    def _mpc(self, cs: ControllerState, p: Plan, u, change, tick):
+    def _mpc(self, cs: ControllerState, p: Plan, u, targets_ahead, add_model, tick):
         """(the MPC's plan, the QP's target acceleration (6,)) of this tick (`mpc.update`):
         re-solved where tick % `MPCConfig.every` == 0 (`tick` None: where the plan is that many
-        ticks old or not valid), for the wrench w_k = u + change[k], k = 0 .. N-1 (`change`
-        (N, 6), `_planned_change`; None: u held)."""
+        ticks old or not valid), for the wrench w_k = u + change[k], k = 0 .. N-1 (the change
+        along `targets_ahead`, `_planned_change`; none: u held), computed only to re-solve."""
         cfg, plan = self.config.mpc, cs.mpc
         if tick is None:
             replan = (cs.t - plan.t0 >= (cfg.every - 0.5) * self.dt) | ~plan.qp.valid
         else:
             replan = tick % cfg.every == 0
-        wrench = jp.tile(u, (cfg.steps, 1)) if change is None else u + change
+
+        def wrench() -> jax.Array:  # (N, 6) w_0 .. w_{N-1}
+            change = self._planned_change(p, targets_ahead, add_model)
+            return jp.tile(u, (cfg.steps, 1)) if change is None else u + change
+
         desired = (p.pos_des, p.vel_des, p.yaw_des, p.yaw_rate_des)
         feet = self._contact_points(p.state)
         return mpc_lib.update(
@@ -215,10 +219,13 @@ class LowLevelController:
         or a traced () bool per env), else 0; None without targets, arms or the model."""
         if targets_ahead is None or self.arm is None or add_model is False:
             return None
-        lever = p.state.rot @ jp.asarray(self.idx.com_offset, jp.float32)  # COM - trunk origin
-        dt = self.config.mpc.dt
+        lever, dt = self._com_lever(p.state), self.config.mpc.dt
         change = arm_estimate_lib.planned_change(self.arm, p.state, lever, targets_ahead, dt)
         return jp.where(add_model, change, 0.0)
+
+    def _com_lever(self, s: BodyState) -> jax.Array:
+        """(3,) m, world: the base's COM minus the trunk's origin, at the measured attitude."""
+        return s.rot @ jp.asarray(self.idx.com_offset, jp.float32)
 
     def swing_legs(self, cs: ControllerState, p: Plan) -> tuple[jax.Array, jax.Array]:
         """The swing feet of this tick: (4, 3) m, world, each foot's position at its last
@@ -297,8 +304,7 @@ class LowLevelController:
             u = jp.where(add_model, u + arm.wrench, u)
         plan, qdd = cs.mpc, None
         if self.config.mpc is not None:
-            change = self._planned_change(p, targets_ahead, add_model)
-            plan, qdd = self._mpc(cs, p, u, change, tick)
+            plan, qdd = self._mpc(cs, p, u, targets_ahead, add_model, tick)
         prob = self.balance_qp(p, u, qdd)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN

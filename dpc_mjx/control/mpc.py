@@ -51,6 +51,7 @@ pushed episodes on `regular`, with it 0.48, the balance QP 0.52; docs/results-mp
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jp
@@ -135,7 +136,8 @@ class MPCQP:
     """The condensed QP `min 1/2 F'PF + q'F + const  s.t.  G F <= h` and its model.
 
     q (n,), h (m,), const (): n = 12 N, m = 24 N. g_blocks (N, 24, 12): the diagonal blocks of
-    G (m, n) (`G`, `g_entries`). gamma (12 N, 12 N) and x_free (12 N,): X = gamma F + x_free.
+    G (m, n) (`G`, `g_entries`). x0 (12,) the state now; gamma (12 N, 12 N) and x_free (12 N,):
+    X = (x_1 .. x_N) = gamma F + x_free.
     contact (N, 4) bool: the stance schedule. A (N, 12, 12), B (N, 12, 12): the model's steps
     (`step_model`), from which `mpc_kkt` solves the interior point's Newton systems and forms
     P x; Q (12,), R (): the weights (`MPCConfig`) of P = gamma' diag(Q tiled) gamma + R I (`P`,
@@ -147,6 +149,7 @@ class MPCQP:
     h: jax.Array
     const: jax.Array
     gamma: jax.Array
+    x0: jax.Array
     x_free: jax.Array
     contact: jax.Array
     A: jax.Array
@@ -266,8 +269,8 @@ def build_mpc_qp(params, config: MPCConfig, x0, x_ref, feet, contact, wrench) ->
     )  # (N, 24, 12), (N, 24)
     return MPCQP(
         q=gamma.T @ (q_diag * err), g_blocks=G, h=h.reshape(-1),
-        const=0.5 * jp.sum(q_diag * err * err), gamma=gamma, x_free=x_free, contact=contact,
-        A=A, B=B, Q=config.Q, R=jp.asarray(config.R, gamma.dtype),
+        const=0.5 * jp.sum(q_diag * err * err), gamma=gamma, x0=x0, x_free=x_free,
+        contact=contact, A=A, B=B, Q=config.Q, R=jp.asarray(config.R, gamma.dtype),
     )  # fmt: skip
 
 
@@ -312,25 +315,26 @@ def update(  # noqa: PLR0913 (the controller's pieces of one tick)
     s: BodyState,
     feet: jax.Array,
     desired: tuple,
-    wrench: jax.Array,
+    wrench: Callable[[], jax.Array],
     replan: bool | jax.Array,
 ) -> tuple[MPCPlan, jax.Array]:
     """One control tick of the MPC: (the plan, re-solved where `replan`; qdd (6,) the balance
     QP's target, `tracked_acceleration`). `t` () s controller time; `s` the measured state;
     `feet` (4, 3) m the contact points now; `desired` (pos_des (3,), vel_des (3,), yaw_des (),
-    yaw_rate ()) of this tick's plan; `wrench` (N, 6) w_0 .. w_{N-1}; `replan` a bool, or a
+    yaw_rate ()) of this tick's plan; `wrench()` (N, 6) w_0 .. w_{N-1}, called only to
+    re-solve (inside the solve's branch); `replan` a bool, or a
     traced () bool (a `lax.cond`: one branch runs where the bool is the same for the whole
     batch, e.g. a tick index; under vmap a batched one runs both). Where the plan is not valid
     (`qp.valid`: a non-finite state, a failed solve) the QP asks for eq. 9's acceleration."""
     pos_des, vel_des, yaw_des, yaw_rate = desired
 
     def solve_now() -> MPCPlan:
-        prob = controller_qp(config, params, gait_, t, s, feet, desired, wrench)
+        w = wrench()
+        prob = controller_qp(config, params, gait_, t, s, feet, desired, w)
         forces, res = solve_mpc(config, prob, warm_start=plan.qp)
-        kept = jp.where(res.valid, wrench, 0.0)  # finite, as the forces (0 where not valid)
-        x0 = state_vector(s.com_pos, s.com_vel, s.rot, s.ang_vel, yaw_des)
+        kept = jp.where(res.valid, w, 0.0)  # finite, as the forces (0 where not valid)
         ahead = (prob.gamma @ forces.reshape(-1) + prob.x_free).reshape(-1, N_STATE)  # x_1..x_N
-        states = jp.where(res.valid, jp.concatenate([x0[None], ahead]), 0.0)
+        states = jp.where(res.valid, jp.concatenate([prob.x0[None], ahead]), 0.0)
         return MPCPlan(forces=forces, wrench=kept, states=states, t0=t, qp=res)
 
     if isinstance(replan, bool):

@@ -109,8 +109,8 @@ class DpcEnv(Env):
         self.sampler = make_sampler(config, self.model, self.lay, len(self.props.objects))
         self.obs_layout = observations.ObsLayout.of(self.lay)
         self._object_bodies = np.array([o.body for o in self.props.objects], int)
-        self._ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
-        self._ee_bodies = self.model.site_bodyid[self._ee_sites]
+        self.ee_sites = np.array([a.ee_site for a in self.lay.arms], int)
+        self._ee_bodies = self.model.site_bodyid[self.ee_sites]
         self._u_scale = jp.array(config.u_scale)  # (6,) N, N·m per unit of action
         self._arm_masses = jp.asarray(self.model.body_mass[self.lay.arm_bodies], jp.float32)  # kg
 
@@ -301,7 +301,7 @@ class DpcEnv(Env):
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
             forces = self.sampler.ee_forces(dist, d.time, self._yaw(d))
-            xfrc = ee_wrench(self.model.nbody, self._ee_sites, self._ee_bodies, d, forces)
+            xfrc = ee_wrench(self.model.nbody, self.ee_sites, self._ee_bodies, d, forces)
             xfrc = xfrc.at[self._object_bodies, :3].add(self.sampler.object_forces(dist))
             d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time, dist)
             d = self.physics.step(d)

@@ -114,10 +114,13 @@ class DisturbanceSampler:
         world = jp.stack([c * x - s * y, s * x + c * y, d.push[:, 2]], axis=-1)
         return world * active[:, None]
 
+    def payload_weights(self, d: Disturbances) -> jax.Array:
+        """(k, 3) N, world: the payload's weight on each end effector."""
+        return jp.zeros((self.n_arms, 3)).at[:, 2].set(-GRAVITY * d.payload)
+
     def ee_forces(self, d: Disturbances, t: jax.Array, yaw: jax.Array) -> jax.Array:
         """(k, 3) N, world: push + payload weight on each end effector at time t."""
-        weight = jp.zeros((self.n_arms, 3)).at[:, 2].set(-GRAVITY * d.payload)
-        return self.pushes(d, t, yaw) + weight
+        return self.pushes(d, t, yaw) + self.payload_weights(d)
 
     def object_forces(self, d: Disturbances) -> jax.Array:
         """(n_obj, 3) N, world: the added weight of each free object (at its COM)."""
