@@ -16,6 +16,8 @@
 #
 # Steps, in this order (name: what; its timeout in s at full size):
 #   bench       dpc-mjx bench at 4,096 and 32,768 envs, one env step per call        (150)
+#   bench_mpc   experiments/bench_mpc.py: the env step with the MPC against the QP,
+#               MJX, 4,096 envs (issue 55's cost on a GPU)                           (150)
 #   train_cold  default dpc-mjx train --device gpu, empty compilation cache           (180)
 #   train_warm  the same again into another run folder, the cache now warm            (120)
 #   eval_cold   dpc-mjx eval: 4 controllers x 1,024 episodes of 20 s (shipped export) (120)
@@ -56,7 +58,8 @@ if [ "$SIZE" = tiny ]; then  # a CPU test of the script itself: every step, a fe
   SAC="--samples 300 --set data_envs=4 eval_episodes=2 eval_steps=10 adapter.epochs=2 \
 sac.num_timesteps=64 sac.num_envs=4 sac.epoch_steps=32 sac.eval_envs=2 sac.batch_size=16 \
 sac.grad_updates_per_step=1 sac.min_replay_size=16 sac.actor_warmup_steps=0"
-  T=(400 400 400 300 300 200 200 300)
+  T=(400 400 400 300 300 200 200 300 300)
+  MPC="--engine native --batches 2 --calls 1 --rounds 1"
 else
   DEVICE=gpu
   ENGINE=mjx
@@ -64,7 +67,8 @@ else
   TRAIN=""
   EVAL="--episodes 1024"
   SAC="--set sac.num_timesteps=262144"  # one epoch of the GPU preset: 1,024 envs x 256 steps
-  T=(150 120 120 180 120 120 90 240)
+  T=(150 120 120 180 120 120 90 240 150)
+  MPC="--engine mjx --batches 4096 --calls 3 --rounds 1"
 fi
 
 step() {  # step NAME TIMEOUT COMMAND...: its log in $OUT/NAME.log (rc last), wall in NAME.ms
@@ -80,6 +84,7 @@ step() {  # step NAME TIMEOUT COMMAND...: its log in $OUT/NAME.log (rc last), wa
 DPC=(env "JAX_COMPILATION_CACHE_DIR=$CACHE" "$PY" -m dpc_mjx.run.cli)  # dpc-mjx, cached
 
 step bench "${T[0]}" "${DPC[@]}" bench $BENCH
+step bench_mpc "${T[8]}" env "JAX_COMPILATION_CACHE_DIR=$CACHE" "$PY" experiments/bench_mpc.py $MPC
 rm -rf "$CACHE"/*  # the train starts cold
 step train_cold "${T[3]}" "${DPC[@]}" train --device $DEVICE --run "$RUNS/cold" $TRAIN
 step train_warm "${T[4]}" "${DPC[@]}" train --device $DEVICE --run "$RUNS/warm" $TRAIN

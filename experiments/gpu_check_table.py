@@ -16,6 +16,7 @@ import sys
 
 STEPS = {  # in the script's order
     "bench": "bench, 1 env step per call",
+    "bench_mpc": "the env step, MPC against QP",
     "train_cold": "default train, cold cache",
     "train_warm": "default train, warm cache",
     "eval_cold": "eval 4 controllers, cold",
@@ -29,6 +30,14 @@ STAGES = ("data_seconds", "adapter_seconds", "sac_compile_seconds", "sac_train_s
 
 def measured(out: pathlib.Path, name: str, log: str) -> str:
     """What the step measured, read from its log and summary."""
+    if name == "bench_mpc":  # | batch | compile QP / MPC | sps QP | MPC | ms QP | MPC | cost |
+        rows = re.findall(
+            r"^\| (\d+) \| ([\d.]+ / [\d.]+) \| ([\d,]+) \| ([\d,]+) \|.*\| ([\d.]+) \|$", log, re.M
+        )
+        return "; ".join(
+            f"{b}: QP {q} env steps/s, MPC {m}, MPC / QP cost {r}x, compile {c} s"
+            for b, c, q, m, r in rows
+        )
     if name.startswith("bench"):
         rows = re.findall(r"^\| (\d+) \| ([\d,]+) \| ([\d,]+) \| ([\d.]+) \| ([\d.]+)", log, re.M)
         return "; ".join(

@@ -36,7 +36,7 @@ from mujoco import mjx
 
 from dpc_mjx import io
 from dpc_mjx.control.arm_model import exact_inputs, servo_motion
-from dpc_mjx.control.controller import oracle_u
+from dpc_mjx.control.state import oracle_u
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate_env, table_row

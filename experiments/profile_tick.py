@@ -34,8 +34,7 @@ import jax.numpy as jp
 import dpc_mjx
 from dpc_mjx.control import estimator, gait, qp, sensors
 from dpc_mjx.control.balance import G_PATTERN
-from dpc_mjx.control.controller import oracle_u
-from dpc_mjx.control.state import has_fallen, read_state
+from dpc_mjx.control.state import has_fallen, oracle_u, read_state
 from dpc_mjx.envs import observations, outcome, rewards, rollout
 from dpc_mjx.timing import Stopwatch, run_calls
 

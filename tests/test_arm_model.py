@@ -24,8 +24,7 @@ from dpc_mjx.control.arm_model import (
     servo_motion,
     servo_qdd,
 )
-from dpc_mjx.control.controller import oracle_u
-from dpc_mjx.control.state import gravity_u, state_index
+from dpc_mjx.control.state import gravity_u, oracle_u, state_index
 from dpc_mjx.robots import ArmSpec, batch_arm_params, build, layout, with_leg_servos
 
 ARMS = ("regular", "double", "so100", "z1")

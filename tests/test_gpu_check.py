@@ -32,6 +32,15 @@ rc=0
 """
 
 
+BENCH_MPC_LOG = """reaching, regular, MBC, mjx, the device's own threads, gpu
+
+| batch | compile + first call, QP / MPC (s) | env steps/s QP | MPC | ms QP | MPC | cost |
+|---|---|---|---|---|---|---|
+| 4096 | 40.1 / 75.3 | 51,200 | 20,480 | 80.0 | 200.0 | 2.50 |
+rc=0
+"""
+
+
 def test_the_table_reads_each_steps_log_and_says_which_failed(tmp_path):
     (tmp_path / "versions.txt").write_text("jax 0.11.2 devices [CudaDevice(id=0)]\n")
     (tmp_path / "bench.log").write_text(BENCH_LOG)
@@ -44,6 +53,7 @@ def test_the_table_reads_each_steps_log_and_says_which_failed(tmp_path):
     summary = {"timings_seconds": timings, "eval": [{"episodes": 1024}]}
     (tmp_path / "summary_cold.json").write_text(json.dumps(summary))
     (tmp_path / "sac.log").write_text("Traceback ...\nDpcError: out of memory\nrc=1\n")
+    (tmp_path / "bench_mpc.log").write_text(BENCH_MPC_LOG)
     rows = gpu_check_table.table(tmp_path).splitlines()
     assert rows[0].startswith("jax 0.11.2")
     bench = next(r for r in rows if r.startswith("| bench, 1 env step"))
@@ -52,6 +62,9 @@ def test_the_table_reads_each_steps_log_and_says_which_failed(tmp_path):
     assert "MJX" in evaluation and "mbc fall rate 0.46" in evaluation
     train = next(r for r in rows if r.startswith("| default train, cold"))
     assert "data 20 s" in train and "eval 1024 episodes" in train and "NLL 0.401" in train
+    mpc = next(r for r in rows if r.startswith("| the env step, MPC against QP"))
+    assert "4096: QP 51,200 env steps/s, MPC 20,480, MPC / QP cost 2.50x" in mpc
+    assert "compile 40.1 / 75.3 s" in mpc
     sac = next(r for r in rows if r.startswith("| paper recipe"))
     assert "| 1 | failed: Traceback ... / DpcError: out of memory |" in sac
     assert next(r for r in rows if r.startswith("| default train, warm")).endswith("not run |")

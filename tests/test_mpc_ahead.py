@@ -24,7 +24,9 @@ from dpc_mjx import DpcError, make
 from dpc_mjx.control.arm_estimate import planned_change
 from dpc_mjx.control.arm_model import arm_model
 from dpc_mjx.control.state import gravity_u, state_index
+from dpc_mjx.envs import ahead
 from dpc_mjx.envs.controller_batch import ControllerBatch
+from dpc_mjx.envs.rollout import run_recorded
 from dpc_mjx.robots import build
 from dpc_mjx.robots.layout import layout
 
@@ -81,7 +83,7 @@ def test_u_ahead_is_an_env_option_with_a_clear_error():
     with pytest.raises(DpcError, match="needs low_level='mpc'"):
         make("reaching", arm="regular", u_ahead="model")
     with pytest.raises(DpcError, match="u_ahead"):
-        make("reaching", arm="regular", low_level="mpc", u_ahead="replay")
+        make("reaching", arm="regular", low_level="mpc", u_ahead="ahead")
 
 
 def test_the_feedforward_plans_along_the_arms_targets(monkeypatch):
@@ -108,3 +110,75 @@ def test_the_feedforward_plans_along_the_arms_targets(monkeypatch):
     assert mbc.any() and (~mbc).any()
     np.testing.assert_allclose(spread[mbc], 0.0, atol=1e-6)  # held
     assert (spread[~mbc] > 0.05).all(), spread  # N, N·m: the arm's planned motion
+
+
+# The privileged replay ('replay', `envs/ahead.py`) -------------------------------------------
+
+_TICK_DT = 0.004  # s, the control tick
+_REPLAY_TOL = 1e-4  # N and N·m: float32 sums of the same wrenches in two compiled programs
+
+
+def test_the_replayed_change_interpolates_the_recording():
+    mpc = types.SimpleNamespace(dt=0.03, steps=N)  # 7.5 ticks a step: between two ticks
+    slope = jp.arange(1.0, 7.0)  # (6,) N and N·m per tick
+    recording = jp.arange(200.0)[:, None] * slope  # (T, 6): r_i = i * slope
+    change = np.asarray(ahead.replay_change(recording, jp.asarray(0.2), _TICK_DT, mpc))
+    want = (np.arange(N) * 0.03 / _TICK_DT)[:, None] * np.asarray(slope)
+    np.testing.assert_allclose(change, want, rtol=1e-5)
+    # past the recording's end it is held: from the last tick on the change stops growing
+    late = np.asarray(ahead.replay_change(recording, jp.asarray(199 * _TICK_DT), _TICK_DT, mpc))
+    np.testing.assert_allclose(late, 0.0, atol=1e-3)
+
+
+def test_a_replay_needs_a_replay_env_and_a_recording_that_fits():
+    held = make("reaching", arm="regular", engine="native", low_level="mpc", controller="oracle")
+    state = jax.vmap(held.reset)(jax.random.split(jax.random.PRNGKey(SEED), 2))
+    with pytest.raises(DpcError, match="u_ahead='replay'"):
+        ahead.attach(state, np.zeros((2, 10, 6)))
+    replay = make(
+        "reaching", arm="regular", engine="native", low_level="mpc", controller="oracle",
+        u_ahead="replay",
+    )  # fmt: skip
+    state = jax.vmap(replay.reset)(jax.random.split(jax.random.PRNGKey(SEED), 2))
+    with pytest.raises(DpcError, match="does not fit"):
+        ahead.attach(state, np.zeros((2, 10, 6)))
+
+
+def _recorded(before, after):
+    """A step's record: its ticks' mount wrenches (the recording), the one it ended with, and
+    the wrench the MPC planned against."""
+    del before
+    return after.info["u_ticks"], after.info["privileged"][:, :6], after.info["ctrl"].mpc.wrench
+
+
+def _plans(before, after):
+    """A step's record: the MPC's plan after it."""
+    del before
+    return after.info["ctrl"].mpc
+
+
+def test_a_replay_plans_against_the_recorded_change(monkeypatch):
+    """Two passes of 12 env steps, the oracle on the MPC, 3 envs, pushes on: the first (a zero
+    recording) plans against u held, and its recording is the measured mount wrench of each
+    tick; the second plans against the recording's change along its horizon."""
+    monkeypatch.setattr(jax, "jit", fast_jit)  # compile-bound: 3 envs, 12 steps
+    options = dict(engine="native", low_level="mpc", controller="oracle", push_force=(30.0, 60.0))
+    replay = make("reaching", arm="regular", u_ahead="replay", **options)
+    steps, episodes = 12, 3
+    _, (ticks, measured, first) = run_recorded(replay, episodes, steps, _recorded, SEED)
+    np.testing.assert_array_equal(first, np.broadcast_to(first[:, :, :1], first.shape))  # held
+    # the first tick of step s + 1 reads the data that step s ended with
+    np.testing.assert_allclose(ticks[1:, :, 0], measured[:-1], atol=_REPLAY_TOL)
+    recordings = ahead.recording(ticks)  # (episodes, steps * 5, 6)
+    assert np.abs(np.diff(recordings, axis=1)).max() > 1.0  # N: the wrench does change
+    length = replay.config.episode_length * replay.n_substeps
+    full = np.pad(recordings, ((0, 0), (0, length - recordings.shape[1]), (0, 0)))
+
+    _, plan = run_recorded(replay, episodes, steps, _plans, SEED, lambda s: ahead.attach(s, full))
+    mpc = replay.controller.config.mpc
+    for s in (3, 8):  # steps whose plans reach into the recording
+        for e in range(episodes):
+            want = ahead.replay_change(jp.asarray(full[e]), plan.t0[s, e], _TICK_DT, mpc)
+            got = plan.wrench[s, e] - plan.wrench[s, e, :1]
+            np.testing.assert_allclose(got, want, atol=_REPLAY_TOL)
+            assert np.abs(got).max() > 0.1  # N: the plan is not held

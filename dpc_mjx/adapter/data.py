@@ -34,8 +34,7 @@ from mujoco import mjx
 
 from dpc_mjx import devices
 from dpc_mjx.control.arm_model import exact_inputs, model_wrench
-from dpc_mjx.control.controller import oracle_u
-from dpc_mjx.control.state import gravity_u
+from dpc_mjx.control.state import gravity_u, oracle_u
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.base import DpcEnv
 from dpc_mjx.envs.observations import PRIVILEGED, S_BODY_DRP
@@ -71,7 +70,7 @@ class Dataset:
     s_drp_next: np.ndarray  # (N, 2) rad/s, roll and pitch rate one env step later
     env_id: np.ndarray | None = None  # (N,) which of the batched envs a row came from
     # (N, 6) privileged, never an input of the adapter or the policy: the oracle's u at t, the
-    # measured mount wrench [f_a (N), tau_a (N·m)] about the base's COM (`controller.oracle_u`),
+    # measured mount wrench [f_a (N), tau_a (N·m)] about the base's COM (`state.oracle_u`),
     # world frame
     u_oracle: np.ndarray | None = None
     u_obs: np.ndarray | None = None  # (N, 6) the observer's estimate at t, yaw frame (obs block)

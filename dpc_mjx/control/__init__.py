@@ -22,16 +22,11 @@ from dpc_mjx.control.balance import (
     default_params,
     solve_balance,
 )
-from dpc_mjx.control.controller import (
-    ControllerState,
-    LowLevelController,
-    make_controller,
-    oracle_u,
-)
+from dpc_mjx.control.controller import ControllerState, LowLevelController, make_controller
 from dpc_mjx.control.gait import stand, trot
 from dpc_mjx.control.observer import ObserverConfig
 from dpc_mjx.control.qp import QPResult, QPSettings, solve
-from dpc_mjx.control.state import has_fallen
+from dpc_mjx.control.state import has_fallen, oracle_u
 
 __all__ = [
     "BalanceParams",

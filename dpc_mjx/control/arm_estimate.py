@@ -20,7 +20,7 @@ Inputs at tick k (world frame; `BodyState` after the sensor model):
 Each low-pass is first order, discrete at the tick: y_k = y_{k-1} + dt / (tau + dt) (x_k -
 y_{k-1}), tau = `ArmEstimateConfig.filter_s`. The state it carries (`ArmEstimate`) is the last
 tick's gyro and arm velocities and the filtered accelerations; its `wrench` is the last estimate
-(6,) [f (N), tau (N·m) about the base's COM], the sign and point of `controller.oracle_u`.
+(6,) [f (N), tau (N·m) about the base's COM], the sign and point of `state.oracle_u`.
 """
 
 from __future__ import annotations

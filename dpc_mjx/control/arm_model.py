@@ -26,7 +26,7 @@ base's COM c, N·m), the rate of the arms' momentum less their weight, negated:
     tau = -sum_j [ (c_j - c) x m_j (a_cj - g) + I_j dw_j + w_j x I_j w_j ]
 
 a_cj, c_j: body j's COM acceleration and position; I_j its inertia about its COM, world frame.
-This is the mount wrench MuJoCo's force/torque sensors read (`controller.oracle_u`) when nothing
+This is the mount wrench MuJoCo's force/torque sensors read (`state.oracle_u`) when nothing
 but the base and gravity acts on the arms; it misses what no model of the arm knows: forces on
 the gripper (pushes, a payload, a grasped object) and model error. Standing still it is the
 arms' weight and its moment (`state.gravity_u`). The joint torques of the same motion

@@ -26,13 +26,8 @@ from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.control import gait
-from dpc_mjx.control.controller import (
-    ControllerState,
-    LowLevelController,
-    make_controller,
-    oracle_u,
-)
-from dpc_mjx.control.state import has_fallen, read_state
+from dpc_mjx.control.controller import ControllerState, LowLevelController, make_controller
+from dpc_mjx.control.state import has_fallen, oracle_u, read_state
 from dpc_mjx.controllers import Controller
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import MjxPhysics, NativePhysics

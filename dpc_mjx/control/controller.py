@@ -5,7 +5,7 @@ Unbatched and pure: `LowLevelController.init(data)` and `.step(state, data, comm
 env's `mjx.Data`; vmap at the call site. Controllers differ only in u:
 
 - `mbc`: u = 0 (the paper's model-based baseline, after Di Carlo et al. 2018);
-- `oracle`: u = the measured arm-mount wrench (privileged upper bound, `oracle_u`);
+- `oracle`: u = the measured arm-mount wrench (privileged upper bound, `state.oracle_u`);
 - `observer`: u = the momentum observer's estimate (`observer.py`; no training, no force sensor):
   pass u = None to `LowLevelController.step`;
 - `feedforward`: u = the arms' model wrench (`arm_estimate.py`, from the arms' files and the
@@ -41,7 +41,7 @@ from dpc_mjx.control.state import (
     read_state,
     state_index,
 )
-from dpc_mjx.robots.layout import Layout, layout, mount_wrench
+from dpc_mjx.robots.layout import Layout, layout
 from dpc_mjx.rotations import rot_z, yaw_of
 
 
@@ -192,11 +192,13 @@ class LowLevelController:
         """(4, 3) m, world: where the feet's forces act, on the ground below each foot's centre."""
         return s.foot_pos.at[:, 2].add(-self.lay.foot_radius)
 
-    def _mpc(self, cs: ControllerState, p: Plan, u, targets_ahead, add_model, tick):
+    def _mpc(self, cs: ControllerState, p: Plan, u, ahead: tuple, tick):
         """(the MPC's plan, the QP's target acceleration (6,)) of this tick (`mpc.update`):
         re-solved where tick % `MPCConfig.every` == 0 (`tick` None: where the plan is that many
-        ticks old or not valid), for the wrench w_k = u + change[k], k = 0 .. N-1 (the change
-        along `targets_ahead`, `_planned_change`; none: u held), computed only to re-solve."""
+        ticks old or not valid), for the wrench w_k = u + change[k], k = 0 .. N-1: `ahead` is
+        (targets_ahead, add_model, u_change), the change `u_change` where given, else along
+        `targets_ahead` (`_planned_change`; none: u held), computed only to re-solve."""
+        targets_ahead, add_model, u_change = ahead
         cfg, plan = self.config.mpc, cs.mpc
         if tick is None:
             replan = (cs.t - plan.t0 >= (cfg.every - 0.5) * self.dt) | ~plan.qp.valid
@@ -204,7 +206,9 @@ class LowLevelController:
             replan = tick % cfg.every == 0
 
         def wrench() -> jax.Array:  # (N, 6) w_0 .. w_{N-1}
-            change = self._planned_change(p, targets_ahead, add_model)
+            change = u_change
+            if change is None:
+                change = self._planned_change(p, targets_ahead, add_model)
             return jp.tile(u, (cfg.steps, 1)) if change is None else u + change
 
         desired = (p.pos_des, p.vel_des, p.yaw_des, p.yaw_rate_des)
@@ -264,6 +268,7 @@ class LowLevelController:
         add_model: bool | jax.Array = False,
         targets_ahead: jax.Array | None = None,
         tick: int | jax.Array | None = None,
+        u_change: jax.Array | None = None,
     ) -> tuple[ControllerState, jax.Array]:
         """One control tick. `command` (3,): forward and lateral velocity (m/s, yaw frame) and yaw
         rate (rad/s); `u` (6,): [f_a (N), tau_a (N·m)], world frame, about the COM, or None for
@@ -277,7 +282,8 @@ class LowLevelController:
         (`control/sensors.py`; None: exact sensors). With the MPC as the low level
         (`ControllerConfig.mpc`): `targets_ahead` (N + 2, n) the arms' servo targets over its
         horizon (`arm_estimate.planned_change`): with `add_model` it plans against u plus the
-        model wrench's change along them (None: u held);
+        model wrench's change along them (None: u held), or against u plus `u_change` (N, 6)
+        given (a replay's, `envs/ahead.py`; privileged);
         `tick` () int, this tick's index in a sequence the whole batch shares (an env step's
         ticks), which times the re-solves as a cond that runs one branch (None: the plan's age
         times them, per env: under vmap both branches run at every tick; `_mpc`).
@@ -304,7 +310,8 @@ class LowLevelController:
             u = jp.where(add_model, u + arm.wrench, u)
         plan, qdd = cs.mpc, None
         if self.config.mpc is not None:
-            plan, qdd = self._mpc(cs, p, u, targets_ahead, add_model, tick)
+            ahead = (targets_ahead, add_model, u_change)
+            plan, qdd = self._mpc(cs, p, u, ahead, tick)
         prob = self.balance_qp(p, u, qdd)
         res = qp.solve(
             prob.P, prob.q, prob.G, prob.h, warm_start=cs.qp, g_pattern=balance.G_PATTERN
@@ -374,23 +381,10 @@ def make_controller(
     )
 
 
-def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
-    """(6,) u from the measured mount wrenches: total arm force on the trunk (N) and its torque
-    about the base's COM (N·m), world frame — the privileged oracle's disturbance estimate."""
-    f_a, tau_a = jp.zeros(3), jp.zeros(3)
-    for arm in lay.arms:
-        force, torque = mount_wrench(arm, d)
-        lever = d.site_xpos[arm.mount_site] - com_pos
-        f_a = f_a + force
-        tau_a = tau_a + torque + jp.cross(lever, force)
-    return jp.concatenate([f_a, tau_a])
-
-
 __all__ = [
     "BodyState",
     "ControllerConfig",
     "ControllerState",
     "LowLevelController",
     "make_controller",
-    "oracle_u",
 ]

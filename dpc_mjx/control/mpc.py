@@ -33,7 +33,8 @@ Cost and its condensed QP (forces only, F = (f_0 .. f_{N-1}) (12 N,); X = (x_1 .
 
 Constraints: per step the balance QP's 24 rows (`balance.friction_constraints`), G block-diagonal
 (24 N, 12 N), passed to `qp.solve` as its static pattern and its 40 N entries. Solved by our
-interior point with a fixed number of iterations, warm-started from the previous plan, each
+interior point with a fixed number of iterations from a cold start (warm from the plan 20 ms
+old, 10 iterations ended up to 160 N from the optimum on pushed trots: docs/results-mpc.md), each
 Newton system by a Riccati recursion over the model's steps (`mpc_kkt`), which also gives P x:
 P (12 N, 12 N) is never formed (`MPCQP.P` forms it for a reference solver).
 
@@ -43,9 +44,8 @@ the balance QP tracks the plan (`tracked_acceleration`): it asks, at every tick,
 acceleration that the plan's forces of the current step give with this tick's lever arms and the
 plan's wrench, so the QP reproduces the plan's forces while the feet and u are as planned, and
 moves the forces where the present u or contacts differ from the plan's; plus eq. 9's feedback
-toward the state the plan predicts for the tick (`MPCPlan.states`), which acts on what happened
-since the solve (a push between two solves: without it MBC on the MPC fell in 0.59 of 128
-pushed episodes on `regular`, with it 0.48, the balance QP 0.52; docs/results-mpc.md).
+toward the state the plan predicts for the tick (`MPCPlan.states`): it acts on what happened
+since the solve, e.g. a push (docs/results-mpc.md).
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ class MPCPlan:
     wrench: (N, 6) the arms' wrench w_k the plan was made for (N, N·m; world, about the COM).
     states: (N + 1, 12) the states x_0 .. x_N the plan predicts (x_0 the state at the solve;
       `state_vector`'s order), which the balance QP tracks between solves.
-    t0: () s, controller time of the solve.  qp: the QPResult (warm start of the next solve).
+    t0: () s, controller time of the solve.  qp: its QPResult (`valid`: whether it holds).
     """
 
     forces: jax.Array
@@ -331,7 +331,7 @@ def update(  # noqa: PLR0913 (the controller's pieces of one tick)
     def solve_now() -> MPCPlan:
         w = wrench()
         prob = controller_qp(config, params, gait_, t, s, feet, desired, w)
-        forces, res = solve_mpc(config, prob, warm_start=plan.qp)
+        forces, res = solve_mpc(config, prob)  # cold: module doc
         kept = jp.where(res.valid, w, 0.0)  # finite, as the forces (0 where not valid)
         ahead = (prob.gamma @ forces.reshape(-1) + prob.x_free).reshape(-1, N_STATE)  # x_1..x_N
         states = jp.where(res.valid, jp.concatenate([prob.x0[None], ahead]), 0.0)

@@ -6,7 +6,7 @@ the body state the controller reads (`state.BodyState`: COM velocity, trunk orie
 angular velocity, foot positions), the stance ground-reaction forces the balance QP asked for at
 the previous tick (`ControllerState.forces`, the QP's f; the feet have no force sensor) and the
 nominal rigid-body model of the balance QP (`BalanceParams.mass` m and trunk-frame inertia I_B
-about the base's COM). Same convention and reference point as `controller.oracle_u`: force on
+about the base's COM). Same convention and reference point as `state.oracle_u`: force on
 the base (trunk + legs; N) and torque about the base's COM (N·m), world frame.
 
 Momentum (centroidal, the rigid base at its home pose; world frame)::

@@ -17,7 +17,7 @@ import numpy as np
 from flax import struct
 
 from dpc_mjx.control.balance import GRAVITY
-from dpc_mjx.robots.layout import Layout
+from dpc_mjx.robots.layout import Layout, mount_wrench
 
 
 @struct.dataclass
@@ -166,3 +166,15 @@ def gravity_u(masses: jax.Array, gravity: jax.Array, coms: jax.Array, com_pos: j
     the IMU's attitude error are not applied to it)."""
     weight = masses[:, None] * gravity  # (n_b, 3) N
     return jp.concatenate([weight.sum(0), jp.cross(coms - com_pos, weight).sum(0)])
+
+
+def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:
+    """(6,) u from the measured mount wrenches: total arm force on the trunk (N) and its torque
+    about the base's COM (N·m), world frame — the privileged oracle's disturbance estimate."""
+    f_a, tau_a = jp.zeros(3), jp.zeros(3)
+    for arm in lay.arms:
+        force, torque = mount_wrench(arm, d)
+        lever = d.site_xpos[arm.mount_site] - com_pos
+        f_a = f_a + force
+        tau_a = tau_a + torque + jp.cross(lever, force)
+    return jp.concatenate([f_a, tau_a])

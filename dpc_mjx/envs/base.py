@@ -27,7 +27,8 @@ State (brax `State`):
                     'controller' () int32 `Controller.index`, only in a batch of mixed
                     controllers (`envs.controller_batch`), else `config.controller`;
                     'objects' (n_obj, 3) m, world positions of the scene's free objects (box,
-                    balls; `objects.prop_layout` order), only in scenes that have some
+                    balls; `objects.prop_layout` order), only in scenes that have some;
+                    'u_replay', 'u_ticks' only with `u_ahead='replay'` (`envs/ahead.py`)
 
 Tasks customise the env through hooks, never by rewriting `step`:
 
@@ -62,9 +63,10 @@ from mujoco import mjx
 
 from dpc_mjx import sim
 from dpc_mjx.control import gait, sensors
-from dpc_mjx.control.controller import make_controller, oracle_u
-from dpc_mjx.control.state import gravity_u, has_fallen
+from dpc_mjx.control.controller import make_controller
+from dpc_mjx.control.state import gravity_u, has_fallen, oracle_u
 from dpc_mjx.controllers import Controller
+from dpc_mjx.envs import ahead as ahead_lib
 from dpc_mjx.envs import observations, outcome, rewards
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.disturbances import Disturbances, ee_wrench, make_sampler
@@ -222,6 +224,7 @@ class DpcEnv(Env):
             "ctrl_queue": jp.tile(d.ctrl, (cfg.sensor_delay, 1)),  # (delay, nu) not yet applied
             **self._objects(d),
         }
+        info |= ahead_lib.replay_info(cfg, self.n_substeps)  # 'replay': its recordings
         metrics = {k: jp.zeros(()) for k in METRICS} | self.task_metrics(d, dist)
         obs = observations.observation(lay, d, dist.command, info["ctrl"].observer.estimate)
         obs = self._measured(obs, bias)
@@ -237,7 +240,7 @@ class DpcEnv(Env):
             tick_keys = None
         dist = self.sampler.advance(info["dist"], d0.time, key)
         command = dist.command
-        d, cs, queue, noise = self._ticks(d0, info, dist, self.policy_u(action), tick_keys)
+        d, cs, queue, noise, u_ticks = self._ticks(d0, info, dist, self.policy_u(action), tick_keys)
 
         true_obs = observations.observation(self.lay, d, command, cs.observer.estimate)
         obs = self._measured(true_obs, noise)  # what the policy reads
@@ -268,6 +271,7 @@ class DpcEnv(Env):
             "privileged": jp.where(bad, 0.0, privileged),
             "nan_reset": bad.astype(jp.float32),
             **self._objects(d),
+            **({"u_ticks": u_ticks} if "u_ticks" in info else {}),  # (n_substeps, 6) 'replay'
         }
         return state.replace(
             pipeline_state=d,
@@ -290,13 +294,11 @@ class DpcEnv(Env):
             (d, cs, queue, _), (i, tick_key) = carry, xs
             noise = None if tick_key is None else sensors.draw(tick_key, bias, scale)
             u, add, model = self.controller_u(d, u_policy, info.get("controller"))
-            targets, ahead = self.arm_targets(dist, d.time, d), None
-            if self.config.u_ahead == "model":  # the servo targets over the MPC's horizon
-                mpc = self.controller.config.mpc
-                times = d.time + mpc.dt * jp.arange(-1, mpc.steps + 1)  # (N + 2,) s
-                ahead = jax.vmap(lambda t: self.arm_targets(dist, t, d))(times)
+            targets = self.arm_targets(dist, d.time, d)
+            ahead, change = ahead_lib.horizon(self, info, dist, d)  # `EnvConfig.u_ahead`
+            measured = self._oracle(d)  # (6,) the tick's mount wrench, a replay's recording
             cs, ctrl = self.controller.step(
-                cs, d, command, u, targets, noise, add, model, targets_ahead=ahead, tick=i
+                cs, d, command, u, targets, noise, add, model, ahead, i, u_change=change
             )
             if self.config.sensor_delay:  # ctrl acts `sensor_delay` ticks after its measurement
                 ctrl, queue = queue[0], jp.concatenate([queue[1:], ctrl[None]])
@@ -305,12 +307,12 @@ class DpcEnv(Env):
             xfrc = xfrc.at[self._object_bodies, :3].add(self.sampler.object_forces(dist))
             d = self.task_physics(d.replace(ctrl=ctrl, xfrc_applied=xfrc), d.time, dist)
             d = self.physics.step(d)
-            return (d, cs, queue, bias if noise is None else noise), None
+            return (d, cs, queue, bias if noise is None else noise), measured
 
         carry = (d0, info["ctrl"], info["ctrl_queue"], bias)
         xs = (jp.arange(self.n_substeps), tick_keys)
-        (d, cs, queue, noise), _ = jax.lax.scan(substep, carry, xs, length=self.n_substeps)
-        return d, cs, queue, noise
+        (d, cs, queue, noise), u_ticks = jax.lax.scan(substep, carry, xs, length=self.n_substeps)
+        return d, cs, queue, noise, u_ticks
 
     # the disturbance u -----------------------------------------------------------------------
 

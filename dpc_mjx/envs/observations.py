@@ -43,7 +43,7 @@ S_BODY_DRP = slice(S_BODY_NAMES.index("wx"), S_BODY_NAMES.index("wy") + 1)
 U_OBS_NAMES = ("obs_fx", "obs_fy", "obs_fz", "obs_tx", "obs_ty", "obs_tz")
 U_OBS_SIZE = len(U_OBS_NAMES)  # 6, the last entries of every env observation
 # Privileged block: the measured mount wrench u = [f_a (N), tau_a (N·m)] about the base's COM, world
-# frame (`controller.oracle_u`); total payload mass (kg); total force applied at the end
+# frame (`state.oracle_u`); total payload mass (kg); total force applied at the end
 # effectors by pushes, payload weight excluded (N, world).
 PRIVILEGED = {"u_oracle": slice(0, 6), "payload": slice(6, 7), "ee_force": slice(7, 10)}
 PRIVILEGED_SIZE = 10

@@ -12,6 +12,8 @@ benchmarks (`make_chunk`). Three layers:
                                       decides when to stop (and shows progress)
     record_episodes                   one scan of per-step records from the reset on (videos,
                                       trajectory figures)
+    run_episodes / run_recorded       the evaluation protocol: per-episode tallies (and per-step
+                                      records, e.g. a replay's first pass: `envs/ahead.py`)
 
 A tally is per env and ends at the env's first done (fall or NaN reset): its return is the sum of
 rewards up to and including the done step (so a fall's penalty counts once), its error sums
@@ -28,6 +30,7 @@ padding. The same seed gives the same envs on any number of devices and processe
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -223,18 +226,65 @@ def run_episodes(
     steps and the env's `TASK_MEASURES` at each episode's end. Steps run in jitted chunks of
     the largest divisor of `steps` not above `chunk`. `groups`: the batch is that many repeats
     of the same episodes (`start`; sweeps)."""
-    if episodes < 1 or steps < 1 or chunk < 1:
+    run = _Run(episodes, steps, seed, chunk, progress, desc, groups)
+    return _run(env, policy, run)[0]
+
+
+def run_recorded(
+    env: Env,
+    episodes: int,
+    steps: int,
+    record: Record | None,
+    seed: int = 0,
+    prepare: Callable[[State], State] | None = None,
+    progress: bool = False,
+    desc: str = "episodes",
+) -> tuple[dict[str, np.ndarray], Any]:
+    """`run_episodes` (action 0) with `record` of every step: (the per-episode arrays, the
+    records as numpy, each (steps, episodes, ...); None without `record`); `prepare` edits the
+    reset batch first (a replay's recordings: `envs.ahead.attach`)."""
+    run = _Run(episodes, steps, seed, 50, progress, desc, 1, record, prepare)
+    return _run(env, zero_policy, run)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Run:
+    """How `_run` runs: `run_episodes`' and `run_recorded`'s arguments."""
+
+    episodes: int
+    steps: int
+    seed: int
+    chunk: int
+    progress: bool
+    desc: str
+    groups: int
+    record: Record | None = None
+    prepare: Callable[[State], State] | None = None
+
+
+def _run(env: Env, policy: Policy, run: _Run) -> tuple[dict[str, np.ndarray], Any]:
+    """The per-episode arrays of `run_episodes` and the records (None without `run.record`)."""
+    episodes, steps = run.episodes, run.steps
+    if episodes < 1 or steps < 1 or run.chunk < 1:
         raise DpcError(
-            f"run_episodes needs episodes, steps and chunk >= 1, got {episodes}, {steps}, {chunk}."
+            f"run_episodes needs episodes, steps and chunk >= 1, got {episodes}, {steps}, "
+            f"{run.chunk}."
         )
-    chunk = max(c for c in range(1, min(chunk, steps) + 1) if steps % c == 0)
-    carry, key = start(env, episodes, seed, groups)
-    run_chunk = make_chunk(batch_fns(env)[1], policy, chunk)
-    with bar(episodes * steps, desc, "step", progress) as pbar:
-        for carry, _ in chunks(run_chunk, carry, key, steps // chunk):
+    chunk = max(c for c in range(1, min(run.chunk, steps) + 1) if steps % c == 0)
+    carry, key = start(env, episodes, run.seed, run.groups)
+    if run.prepare is not None:
+        carry = (run.prepare(carry[0]), carry[1])
+    run_chunk = make_chunk(batch_fns(env)[1], policy, chunk, run.record)
+    records = []
+    with bar(episodes * steps, run.desc, "step", run.progress) as pbar:
+        for carry, rec in chunks(run_chunk, carry, key, steps // chunk):
+            records.append(rec)
             pbar.update(episodes * chunk)
     t = jax.tree.map(lambda x: x[:episodes], devices.to_host(carry[1]))  # padding dropped
-    return {
+    stacked = None
+    if run.record is not None:  # (steps, episodes, ...), the padding dropped
+        stacked = jax.tree.map(lambda *r: np.concatenate(r)[:, :episodes], *records)
+    per_episode = {
         "return": np.asarray(t.ret),
         "length": np.asarray(t.length),
         "fell": np.asarray(t.fell) > 0,
@@ -243,3 +293,4 @@ def run_episodes(
         **{k: np.asarray(v) for k, v in t.errors.items()},
         **{k: np.asarray(v) for k, v in t.final.items()},
     }
+    return per_episode, stacked
