@@ -144,6 +144,24 @@ def test_a_replay_needs_a_replay_env_and_a_recording_that_fits():
         ahead.attach(state, np.zeros((2, 10, 6)))
 
 
+def test_the_pushes_change_is_their_schedule_as_a_wrench_about_the_com():
+    env = make("reaching", arm="regular", engine="native", low_level="mpc", u_ahead="pushes")
+    state = jax.jit(env.reset)(jax.random.PRNGKey(SEED))
+    d = state.pipeline_state
+    t = float(d.time)
+    dist = state.info["dist"].replace(  # one push of 50 N down, 0.1 s to 0.2 s from now
+        push=jp.array([[0.0, 0.0, -50.0]]),
+        push_on=jp.array([t + 0.1]),
+        push_off=jp.array([t + 0.2]),
+    )
+    change = np.asarray(ahead.push_change(env, dist, d))  # (N, 6) at t + k 0.03 s
+    force = np.array([0.0, 0.0, -50.0])
+    lever = np.asarray(d.site_xpos[env.ee_sites[0]] - env.com_pos(d))
+    on = (np.arange(N) * 0.03 >= 0.1 - 1e-6) & (np.arange(N) * 0.03 < 0.2 - 1e-6)  # k = 4, 5, 6
+    want = np.where(on[:, None], np.concatenate([force, np.cross(lever, force)]), 0.0)
+    np.testing.assert_allclose(change, want, atol=1e-4)
+
+
 def _recorded(before, after):
     """A step's record: its ticks' mount wrenches (the recording), the one it ended with, and
     the wrench the MPC planned against."""
