@@ -8,13 +8,14 @@ Reads, per arm, what these wrote (the same `--seed` and `--episodes` for every f
     qp-ARM.csv      dpc-mjx eval --controllers mbc feedforward oracle --env low_level=qp
     mpc-ARM.csv     the same with --env low_level=mpc (u held over the horizon)
     ahead-ARM.csv   --controllers feedforward --env low_level=mpc u_ahead=model
+    pushes-ARM.csv  --controllers feedforward oracle --env low_level=mpc u_ahead=pushes
     replay/ARM-oracle-held.csv, replay/ARM-oracle-replay.csv
                     python experiments/mpc_replay.py --arm ARM (the oracle held, then replayed)
 
 and prints, per arm, the fall rates of the cells (95% Wilson) and the paired differences that
 decide: MPC - QP per controller, the feedforward ahead - held, the oracle replayed - held
-(privileged), and the best MPC cell against the best QP cell of the controllers a robot has
-(MBC, feedforward). A file that is missing leaves its rows out.
+(privileged) and the pushes' part of it (privileged). A file that is missing leaves its rows
+out.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ def cells(folder: pathlib.Path, arm: str) -> dict[str, dict]:
         "MPC, oracle held": (f"mpc-{arm}.csv", "oracle"),
         "MPC, oracle held (replay's first pass)": (f"replay/{arm}-oracle-held.csv", "oracle"),
         "MPC, oracle replayed": (f"replay/{arm}-oracle-replay.csv", "oracle"),
+        "MPC, feedforward pushes ahead": (f"pushes-{arm}.csv", "feedforward"),
+        "MPC, oracle pushes ahead": (f"pushes-{arm}.csv", "oracle"),
     }
     found = {}
     for name, (file, controller) in sources.items():
@@ -57,6 +60,9 @@ PAIRS = (
     ("MPC, feedforward ahead", "QP, feedforward"),
     ("MPC, oracle replayed", "MPC, oracle held (replay's first pass)"),
     ("MPC, oracle replayed", "QP, oracle"),
+    ("MPC, feedforward pushes ahead", "MPC, feedforward held"),
+    ("MPC, oracle pushes ahead", "MPC, oracle held"),
+    ("MPC, oracle replayed", "MPC, oracle pushes ahead"),
 )
 
 
