@@ -160,6 +160,12 @@ def test_the_pushes_change_is_their_schedule_as_a_wrench_about_the_com():
     on = (np.arange(N) * 0.03 >= 0.1 - 1e-6) & (np.arange(N) * 0.03 < 0.2 - 1e-6)  # k = 4, 5, 6
     want = np.where(on[:, None], np.concatenate([force, np.cross(lever, force)]), 0.0)
     np.testing.assert_allclose(change, want, atol=1e-4)
+    # of the pushes under way only: this one has not begun, its change is not known
+    np.testing.assert_allclose(ahead.push_change(env, dist, d, begun_only=True), 0.0, atol=1e-6)
+    begun = dist.replace(push_on=jp.array([t - 0.1]))  # under way, ends at t + 0.2
+    ends = np.asarray(ahead.push_change(env, begun, d, begun_only=True))
+    off = np.arange(N) * 0.03 >= 0.2 - 1e-6  # k >= 7: it has ended
+    np.testing.assert_allclose(ends, np.where(off[:, None], -want[4], 0.0), atol=1e-4)
 
 
 def _recorded(before, after):

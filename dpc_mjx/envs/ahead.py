@@ -1,7 +1,8 @@
 """The wrench the MPC plans against over its horizon, as the env gives it (`EnvConfig.u_ahead`):
 the arms' servo targets ahead ('model', for the arms' model wrench's change along them), the
 measured wrench's change along a recording of the same episode ('replay': privileged, the bound)
-or the pushes' change from their schedule ('pushes': privileged, `push_change`).
+or the pushes' change from their schedule ('pushes', or of those under way only 'push_ends':
+privileged, `push_change`).
 
 A replay is two passes over the same episodes (same seed): the first records the measured
 arm-mount wrench (the oracle's u) at every control tick (`info['u_ticks']`, (n_substeps, 6) per
@@ -30,29 +31,32 @@ from dpc_mjx.rotations import yaw_of
 def horizon(env, info: dict, dist, d) -> tuple[jax.Array | None, jax.Array | None]:
     """(targets_ahead, u_change) of a tick for `LowLevelController.step`, by the env's
     `EnvConfig.u_ahead`: 'model' the servo targets ahead (`servo_targets`), 'replay' the
-    recorded wrench's change (`replay_change` of `info['u_replay']`), 'pushes' theirs
-    (`push_change`), 'held' neither."""
+    recorded wrench's change (`replay_change` of `info['u_replay']`), 'pushes' and
+    'push_ends' theirs (`push_change`), 'held' neither."""
     if env.config.u_ahead == "model":
         return servo_targets(env, dist, d), None
     if env.config.u_ahead == "replay":
         mpc = env.controller.config.mpc
         return None, replay_change(info["u_replay"], d.time, env.controller.dt, mpc)
-    if env.config.u_ahead == "pushes":
-        return None, push_change(env, dist, d)
+    if env.config.u_ahead in ("pushes", "push_ends"):
+        return None, push_change(env, dist, d, begun_only=env.config.u_ahead == "push_ends")
     return None, None
 
 
-def push_change(env, dist, d) -> jax.Array:
+def push_change(env, dist, d, begun_only: bool = False) -> jax.Array:
     """(N, 6) P(t + k dt) - P(t), k = 0 .. N - 1 ('pushes', privileged): P(t) the pushes at the
     grippers at time t from the episode's schedule (`Sampler.pushes`: the push under way and
     the next one, drawn when the last ended) as a wrench about the base's COM, world frame
     (N, N·m): sum_i [f_i, (x_i - c) x f_i], x_i the grippers and c the COM as they are now,
     the heading held. A push reaches the trunk through the arm as this wrench where the arm
-    holds still; its servos giving way is what the bound does not know."""
+    holds still; its servos giving way is what the bound does not know. `begun_only`
+    ('push_ends'): only the pushes begun by t, so the change is when they end."""
     mpc = env.controller.config.mpc
     times = d.time + mpc.dt * jp.arange(mpc.steps)  # (N,) s
     yaw = yaw_of(d.xmat[env.controller.idx.trunk])  # () rad, the heading now
     forces = jax.vmap(lambda t: env.sampler.pushes(dist, t, yaw))(times)  # (N, k, 3) N
+    if begun_only:
+        forces = forces * (dist.push_on <= d.time)[None, :, None]
     lever = d.site_xpos[env.ee_sites] - env.com_pos(d)  # (k, 3) m
     wrench = jp.concatenate([forces.sum(1), jp.cross(lever, forces).sum(1)], axis=-1)
     return wrench - wrench[0]

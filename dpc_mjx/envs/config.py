@@ -37,7 +37,7 @@ from dpc_mjx.envs.checks import (
 from dpc_mjx.errors import DpcError
 from dpc_mjx.physics import ENGINE_CHOICES
 
-U_AHEAD = ("held", "model", "replay", "pushes")  # `EnvConfig.u_ahead`
+U_AHEAD = ("held", "model", "replay", "pushes", "push_ends")  # `EnvConfig.u_ahead`
 CONTROLLERS = tuple(Controller)  # and 'policy', the old name of 'dpc' (`controllers.ALIASES`)
 U_FRAMES = ("yaw", "world")
 # what DPC's policy u is added to (`EnvConfig.u_base`)
@@ -105,7 +105,8 @@ class EnvConfig:
     # or 'replay' (the present u plus the measured wrench's change along a recording of the
     # same episode, for every controller: privileged, the bound; `envs/ahead.py`) or 'pushes'
     # (the present u plus the change of the pushes at the grippers, from their schedule:
-    # privileged, what of the bound the pushes' timing is)
+    # privileged, what of the bound the pushes' timing is) or 'push_ends' (the same for the
+    # pushes under way only: when they end, not when the next begins)
     u_ahead: str = "held"
     # Physics engine (`dpc_mjx/physics.py`): 'mjx' (JAX, on the device), 'native' (MuJoCo C on
     # the same model, on the host: the faster path on a CPU, and sim-to-sim) or 'auto' (native
