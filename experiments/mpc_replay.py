@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import time
 
 from dpc_mjx import io
 from dpc_mjx.envs import ahead
@@ -28,6 +27,7 @@ from dpc_mjx.envs.rollout import run_recorded
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import PAIRED_HEADER, cell_result, paired_row, table_row
 from dpc_mjx.run.report import write_episodes_csv
+from dpc_mjx.timing import Stopwatch
 
 
 def replay_env(arm: str, controller: str, engine: str = "native"):
@@ -50,19 +50,14 @@ def main() -> None:
     steps, eps, seed = env.config.episode_length, args.episodes, args.seed
     record = lambda before, after: after.info["u_ticks"]  # noqa: E731  (B, n_substeps, 6)
     cells = {}
-    t0 = time.perf_counter()
-    held, ticks = run_recorded(env, eps, steps, record, seed, progress=True, desc="held, recorded")
+    with Stopwatch() as first:
+        held, ticks = run_recorded(env, eps, steps, record, seed, progress=True, desc="recorded")
     recordings = ahead.recording(ticks)  # (episodes, steps * n_substeps, 6)
-    cells["held"] = cell_result(
-        args.arm, args.controller, held, steps, seed, time.perf_counter() - t0
-    )
-    t0 = time.perf_counter()
-    replayed, _ = run_recorded(
-        env, eps, steps, None, seed, lambda s: ahead.attach(s, recordings), True, "replayed"
-    )
-    cells["replay"] = cell_result(
-        args.arm, args.controller, replayed, steps, seed, time.perf_counter() - t0
-    )
+    cells["held"] = cell_result(args.arm, args.controller, held, steps, seed, first.seconds)
+    with Stopwatch() as second:
+        attach = lambda s: ahead.attach(s, recordings)  # noqa: E731
+        replayed, _ = run_recorded(env, eps, steps, None, seed, attach, True, "replayed")
+    cells["replay"] = cell_result(args.arm, args.controller, replayed, steps, seed, second.seconds)
     out = pathlib.Path(args.out)
     for name, cell in cells.items():
         write_episodes_csv(out / f"{args.arm}-{args.controller}-{name}.csv", [cell])
