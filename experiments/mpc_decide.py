@@ -9,13 +9,14 @@ Reads, per arm, what these wrote (the same `--seed` and `--episodes` for every f
     mpc-ARM.csv     the same with --env low_level=mpc (u held over the horizon)
     ahead-ARM.csv   --controllers feedforward --env low_level=mpc u_ahead=model
     pushes-ARM.csv  --controllers feedforward oracle --env low_level=mpc u_ahead=pushes
+    ends-ARM.csv    the same with u_ahead=push_ends
     replay/ARM-oracle-held.csv, replay/ARM-oracle-replay.csv
                     python experiments/mpc_replay.py --arm ARM (the oracle held, then replayed)
 
 and prints, per arm, the fall rates of the cells (95% Wilson) and the paired differences that
 decide: MPC - QP per controller, the feedforward ahead - held, the oracle replayed - held
-(privileged) and the pushes' part of it (privileged). A file that is missing leaves its rows
-out.
+(privileged) and the pushes' part of it (privileged: their whole schedule, or the ends of those
+under way). A file that is missing leaves its rows out.
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ def cells(folder: pathlib.Path, arm: str) -> dict[str, dict]:
         "MPC, oracle replayed": (f"replay/{arm}-oracle-replay.csv", "oracle"),
         "MPC, feedforward pushes ahead": (f"pushes-{arm}.csv", "feedforward"),
         "MPC, oracle pushes ahead": (f"pushes-{arm}.csv", "oracle"),
+        "MPC, feedforward push ends ahead": (f"ends-{arm}.csv", "feedforward"),
+        "MPC, oracle push ends ahead": (f"ends-{arm}.csv", "oracle"),
     }
     found = {}
     for name, (file, controller) in sources.items():
@@ -63,6 +66,9 @@ PAIRS = (
     ("MPC, feedforward pushes ahead", "MPC, feedforward held"),
     ("MPC, oracle pushes ahead", "MPC, oracle held"),
     ("MPC, oracle replayed", "MPC, oracle pushes ahead"),
+    ("MPC, feedforward push ends ahead", "MPC, feedforward held"),
+    ("MPC, oracle push ends ahead", "MPC, oracle held"),
+    ("MPC, oracle pushes ahead", "MPC, oracle push ends ahead"),
 )
 
 
