@@ -62,9 +62,11 @@ def main() -> None:
     for name, cell in cells.items():
         write_episodes_csv(out / f"{args.arm}-{args.controller}-{name}.csv", [cell])
         print(f"{name}: {table_row(cell)}", flush=True)
-    first, second = ((c.per_episode["fell"], c.per_episode["return"]) for c in cells.values())
+    held_pair, replay_pair = (
+        (c.per_episode["fell"], c.per_episode["return"]) for c in cells.values()
+    )
     print(PAIRED_HEADER)
-    print(paired_row(f"{args.arm} {args.controller}: replay - held", second, first))
+    print(paired_row(f"{args.arm} {args.controller}: replay - held", replay_pair, held_pair))
 
 
 if __name__ == "__main__":
