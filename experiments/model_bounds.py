@@ -36,7 +36,7 @@ from mujoco import mjx
 
 from dpc_mjx import io
 from dpc_mjx.control.arm_model import exact_inputs, servo_motion
-from dpc_mjx.control.state import oracle_u
+from dpc_mjx.control.state import forces_u, oracle_u
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate_env, table_row
@@ -65,8 +65,7 @@ def bounded(env, part: str, tau: float = 0.1):
             ramped = weight + push * ramp[:, None]
             forces = {"all": push + weight, "payload": weight, "push": push, "ramped": ramped}
             forces = forces[part]  # (k, 3) N
-            lever = d.site_xpos[self.ee_sites] - self.com_pos(d)  # (k, 3) m, world
-            return jp.concatenate([forces.sum(0), jp.cross(lever, forces).sum(0)])
+            return forces_u(forces, d.site_xpos[self.ee_sites], self.com_pos(d))
 
     env.__class__ = Bound
     return env

@@ -3,7 +3,7 @@
 Frames: world (z up). Data fields read after `mjx.step` mix the new qvel with kinematics of the
 previous step (positions are 4 ms old), as a real sensor pipeline would. Also the weights the
 controllers count as known, as wrenches about the base's COM (`legs_weight_wrench`,
-`gravity_u`).
+`gravity_u`, and any forces at points, `forces_u`).
 """
 
 from __future__ import annotations
@@ -158,14 +158,19 @@ def legs_weight_wrench(idx: StateIndex, d, s: BodyState, stance: jax.Array, foot
     return jp.concatenate([extra.sum(0), jp.cross(contact - s.com_pos, extra).sum(0)])
 
 
+def forces_u(forces: jax.Array, points: jax.Array, com_pos: jax.Array) -> jax.Array:
+    """(6,) u = sum over i of [f_i, (x_i - c) x f_i] (N, N·m; world frame): the forces `forces`
+    (k, 3) N acting at the points `points` (k, 3) m, as one wrench about `com_pos` (3,) m."""
+    return jp.concatenate([forces.sum(0), jp.cross(points - com_pos, forces).sum(0)])
+
+
 def gravity_u(masses: jax.Array, gravity: jax.Array, coms: jax.Array, com_pos: jax.Array):
     """(6,) u = sum over bodies b of [m_b g, (c_b - c) x m_b g] (N, N·m; world frame): the
     weight of the bodies `masses` (n_b,) kg at their COMs `coms` (n_b, 3) m and its torque about
-    `com_pos` (3,) m, under `gravity` (3,) m/s^2. For the arm bodies at their simulated pose, the
-    static part of the mount wrench that `oracle_u` measures (the arm encoders' 0.001 rad and
-    the IMU's attitude error are not applied to it)."""
-    weight = masses[:, None] * gravity  # (n_b, 3) N
-    return jp.concatenate([weight.sum(0), jp.cross(coms - com_pos, weight).sum(0)])
+    `com_pos` (3,) m, under `gravity` (3,) m/s^2 (`forces_u`). For the arm bodies at their
+    simulated pose, the static part of the mount wrench that `oracle_u` measures (the arm
+    encoders' 0.001 rad and the IMU's attitude error are not applied to it)."""
+    return forces_u(masses[:, None] * gravity, coms, com_pos)  # weights (n_b, 3) N
 
 
 def oracle_u(lay: Layout, d, com_pos: jax.Array) -> jax.Array:

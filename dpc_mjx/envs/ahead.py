@@ -24,6 +24,7 @@ import numpy as np
 from brax.envs.base import State
 
 from dpc_mjx import devices
+from dpc_mjx.control.state import forces_u
 from dpc_mjx.errors import DpcError
 from dpc_mjx.rotations import yaw_of
 
@@ -57,8 +58,8 @@ def push_change(env, dist, d, begun_only: bool = False) -> jax.Array:
     forces = jax.vmap(lambda t: env.sampler.pushes(dist, t, yaw))(times)  # (N, k, 3) N
     if begun_only:
         forces = forces * (dist.push_on <= d.time)[None, :, None]
-    lever = d.site_xpos[env.ee_sites] - env.com_pos(d)  # (k, 3) m
-    wrench = jp.concatenate([forces.sum(1), jp.cross(lever, forces).sum(1)], axis=-1)
+    grippers, com = d.site_xpos[env.ee_sites], env.com_pos(d)  # (k, 3), (3,) m
+    wrench = jax.vmap(lambda f: forces_u(f, grippers, com))(forces)  # (N, 6)
     return wrench - wrench[0]
 
 

@@ -271,7 +271,7 @@ class DpcEnv(Env):
             "privileged": jp.where(bad, 0.0, privileged),
             "nan_reset": bad.astype(jp.float32),
             **self._objects(d),
-            **({"u_ticks": u_ticks} if "u_ticks" in info else {}),  # (n_substeps, 6) 'replay'
+            **({} if u_ticks is None else {"u_ticks": u_ticks}),  # (n_substeps, 6) 'replay'
         }
         return state.replace(
             pipeline_state=d,
@@ -296,7 +296,8 @@ class DpcEnv(Env):
             u, add, model = self.controller_u(d, u_policy, info.get("controller"))
             targets = self.arm_targets(dist, d.time, d)
             ahead, change = ahead_lib.horizon(self, info, dist, d)  # `EnvConfig.u_ahead`
-            measured = self._oracle(d)  # (6,) the tick's mount wrench, a replay's recording
+            # (6,) the tick's mount wrench, a replay's recording ('replay' only: a hot path)
+            measured = self._oracle(d) if self.config.u_ahead == "replay" else None
             cs, ctrl = self.controller.step(
                 cs, d, command, u, targets, noise, add, model, ahead, i, u_change=change
             )
