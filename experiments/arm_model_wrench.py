@@ -73,7 +73,7 @@ def rollouts(arm: str, options: dict, args, exact: bool = False) -> dict:
             "done": after.done,
         }
         if exact:
-            out["exact"], out["exact_oracle"] = jax.vmap(lambda x: exact_wrenches(env, x))(d)
+            out["exact"], out["exact_oracle"], _ = jax.vmap(lambda x: exact_wrenches(env, x))(d)
         return out
 
     carry, key = rollout.start(env, args.episodes, args.seed)

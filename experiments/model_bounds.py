@@ -32,11 +32,10 @@ import argparse
 import pathlib
 
 import jax.numpy as jp
-from mujoco import mjx
 
 from dpc_mjx import io
-from dpc_mjx.control.arm_model import exact_inputs, servo_motion
-from dpc_mjx.control.state import forces_u, oracle_u
+from dpc_mjx.adapter.data import felt_u
+from dpc_mjx.control.state import forces_u
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate_env, table_row
@@ -69,17 +68,6 @@ def bounded(env, part: str, tau: float = 0.1):
 
     env.__class__ = Bound
     return env
-
-
-def felt_u(env, d):
-    """(6,) world: u_oracle - the arms' model wrench of their servos' motion on the exact state
-    and base acceleration (one `mjx.forward` of `d`; privileged)."""
-    d = mjx.forward(env.mx, d)
-    offset = jp.asarray(env.controller.idx.com_offset, jp.float32)
-    gravity = jp.asarray(env.model.opt.gravity, jp.float32)
-    base, (q, qd, _) = exact_inputs(env.lay, offset, gravity, d)
-    model, _ = servo_motion(env.arm_model, base, q, qd, d.ctrl[env.lay.arm_act])
-    return oracle_u(env.lay, d, env.com_pos(d)) - model
 
 
 def main() -> None:

@@ -12,7 +12,7 @@ from helpers import ENGINE, FAST_COMPILE
 
 import dpc_mjx
 from dpc_mjx import DpcError
-from dpc_mjx.adapter.data import Dataset, payload_u, unmodelled_u
+from dpc_mjx.adapter.data import Dataset, felt_u, payload_u, unmodelled_u
 from dpc_mjx.envs import DEFAULT_TASK
 from dpc_mjx.policy.regression import U_CLIP, regression_target
 from dpc_mjx.rotations import wrench_to_world, wrench_to_yaw_frame
@@ -66,8 +66,8 @@ def test_only_dpc_adds_the_estimate_and_bad_bases_are_refused():
 
 
 def _random_wrenches(n: int = 32) -> Dataset:
-    """n rows of random u_oracle, u_gravity, u_unmodelled and u_payload (world frame), u_obs (yaw
-    frame) and headings."""
+    """n rows of random u_oracle, u_gravity, u_unmodelled, u_payload and u_felt (world frame),
+    u_obs (yaw frame) and headings."""
     rng = np.random.default_rng(0)
     yaw = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
     wrench = lambda: rng.normal(0.0, 5.0, (n, 6)).astype(np.float32)  # noqa: E731 (N, N·m)
@@ -82,6 +82,7 @@ def _random_wrenches(n: int = 32) -> Dataset:
         u_gravity=wrench(),
         u_unmodelled=wrench(),
         u_payload=wrench(),
+        u_felt=wrench(),
     )
 
 
@@ -120,10 +121,11 @@ def test_the_target_on_the_arms_gravity_is_the_oracles_u_minus_it():
 def test_the_target_on_the_arms_model_is_what_the_model_cannot_know():
     """u_base 'model': the actor is fitted to u_unmodelled alone (the oracle's u minus the model
     wrench on the exact state), with `model_target` 'payload' to u_payload alone (the payloads'
-    weight wrench), in either frame; without its column, refused."""
+    weight wrench), with 'felt' to u_felt alone, in either frame; without its column, refused."""
     data = _random_wrenches()
     scale = np.full(6, 40.0, np.float32)
-    for target, column in (("unmodelled", "u_unmodelled"), ("payload", "u_payload")):
+    targets = (("unmodelled", "u_unmodelled"), ("payload", "u_payload"), ("felt", "u_felt"))
+    for target, column in targets:
         wrench = getattr(data, column)
         world = regression_target(data, scale, "world", "model", model_target=target)
         np.testing.assert_allclose(world, np.clip(wrench / scale, -U_CLIP, U_CLIP), atol=_U_TOL)
@@ -133,7 +135,8 @@ def test_the_target_on_the_arms_model_is_what_the_model_cannot_know():
         without = dataclasses.replace(data, **{column: None})
         with pytest.raises(DpcError, match=f"no {column}"):
             regression_target(without, scale, "world", "model", model_target=target)
-    assert not np.allclose(data.u_unmodelled, data.u_payload)  # the two targets differ here
+    assert not np.allclose(data.u_unmodelled, data.u_payload)  # the targets differ here
+    assert not np.allclose(data.u_unmodelled, data.u_felt)
 
 
 def test_the_model_target_is_checked():
@@ -258,3 +261,30 @@ def test_the_unmodelled_wrench_is_the_force_on_the_gripper(payload):
         carried = jp.full((_BATCH, 1), payload, jp.float32)  # kg, one arm
         u_payload = np.asarray(jax.vmap(lambda x, m: payload_u(env, x, m))(d, carried))
         np.testing.assert_allclose(u_payload, u, atol=_UNMODELLED_TOL_F)
+
+
+def test_what_the_mount_feels_beyond_the_servos_motion_is_zero_on_a_free_arm():
+    """`adapter.data.felt_u` (`Dataset.u_felt`, the 'felt' target): with no push and no payload,
+    and no joint limit or friction acting on the arm, the servos' law and the arm's model give
+    the arm's motion (tests/test_arm_model.py), so the mount feels nothing beyond it; with a
+    payload it is not zero, and smaller than the payload's weight (the servos hold the load, and
+    the model of their motion sees their effort)."""
+    for payload in (0.0, _PAYLOAD_KG):
+        env = dpc_mjx.make(
+            DEFAULT_TASK,
+            arm="regular",
+            engine=ENGINE,
+            controller="mbc",
+            push_force=(0.0, 0.0),
+            payload_mass=(payload, payload),
+        )
+        for state in _states(env, np.zeros(6)):
+            d = state.pipeline_state
+            assert not np.any(np.asarray(d.qfrc_constraint)[:, env.lay.arm_dof])  # a free arm
+            felt = np.asarray(jax.vmap(lambda x: felt_u(env, x))(d))  # (B, 6) world
+            if payload == 0.0:
+                np.testing.assert_allclose(felt, 0.0, atol=_UNMODELLED_TOL_F)
+            else:
+                weight = payload * 9.81  # N
+                assert np.all(np.linalg.norm(felt[:, :3], axis=1) > 10 * _UNMODELLED_TOL_F)
+                assert np.all(np.linalg.norm(felt[:, :3], axis=1) < weight)

@@ -10,7 +10,8 @@ env whose observation is `[s_body, s_arm, p_arm, u_obs]`. Each row also keeps, f
 regression (`policy.regression`), the observer's estimate u_obs, the oracle's u (privileged), the
 arms' gravity wrench, what the arms' model cannot know (`unmodelled_u`: privileged, one extra
 forward pass per env step), the part of it that is the payloads' weight (`payload_u`:
-privileged) and the heading (to turn u into the yaw frame).
+privileged), what the mount feels beyond the arms' servo motion (`felt_u`: privileged, same pass)
+and the heading (to turn u into the yaw frame).
 
 s_drp = (roll rate, pitch rate): the trunk's angular velocity about its own x and y axes (rad/s,
 trunk frame, what an IMU's gyro reads), i.e. s_body[2:4] one env step (20 ms) later.
@@ -33,7 +34,7 @@ import numpy as np
 from mujoco import mjx
 
 from dpc_mjx import devices
-from dpc_mjx.control.arm_model import exact_inputs, model_wrench
+from dpc_mjx.control.arm_model import exact_inputs, model_wrench, servo_motion
 from dpc_mjx.control.state import gravity_u, oracle_u
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.base import DpcEnv
@@ -57,6 +58,7 @@ _ROWS = (
     "u_gravity",
     "u_unmodelled",
     "u_payload",
+    "u_felt",
 )
 
 
@@ -86,6 +88,10 @@ class Dataset:
     # each gripper and its moment about the base's COM (`payload_u`), world; the target of DPC
     # on the model with `RunConfig.model_target` 'payload' (`policy.regression`)
     u_payload: np.ndarray | None = None
+    # (N, 6) privileged: what the mount feels beyond the arms' model of their servos' motion, the
+    # oracle's u minus `servo_motion`'s wrench on the exact state and base acceleration (`felt_u`),
+    # world; the target of DPC on the model with `RunConfig.model_target` 'felt'
+    u_felt: np.ndarray | None = None
     env_steps: int = 0  # env steps run to collect them (kept + dropped)
     seconds: float = 0.0  # wall time of the collection
 
@@ -128,6 +134,10 @@ class Dataset:
     def u_payload_in(self, frame: str) -> np.ndarray:
         """(N, 6) the payloads' weight wrench in `frame` ('world', or 'yaw': turned by `yaw`)."""
         return self._world_wrench_in("u_payload", frame)
+
+    def u_felt_in(self, frame: str) -> np.ndarray:
+        """(N, 6) what the mount feels beyond the servos' motion in `frame` (as `u_oracle_in`)."""
+        return self._world_wrench_in("u_felt", frame)
 
     def _world_wrench_in(self, name: str, frame: str) -> np.ndarray:
         """(N, 6) the world-frame wrench column `name` in `frame` ('world' or 'yaw')."""
@@ -236,25 +246,39 @@ class Dataset:
         return self.take(slice(0, len(self) - n_val)), self.take(slice(len(self) - n_val, None))
 
 
-def exact_wrenches(env: DpcEnv, d) -> tuple[jax.Array, jax.Array]:
-    """(the arms' model wrench on the exact state and accelerations, the oracle's u) of one env's
-    data `d`, both (6,) N and N·m about the base's COM, world, from one `mjx.forward` of `d`
-    (privileged: `arm_model.exact_inputs`). Zeros for a base without arms."""
+def exact_wrenches(env: DpcEnv, d) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """(the arms' model wrench on the exact state and accelerations, the oracle's u, the model
+    wrench of the servos' motion on the exact state and base acceleration toward the servos'
+    targets `d.ctrl`) of one env's data `d`, each (6,) N and N·m about the base's COM, world,
+    from one `mjx.forward` of `d` (privileged: `arm_model.exact_inputs`, `servo_motion`). Zeros
+    for a base without arms."""
     if env.arm_model is None:
-        return jp.zeros(6), jp.zeros(6)
+        return jp.zeros(6), jp.zeros(6), jp.zeros(6)
     d = mjx.forward(env.mx, d)
     offset = jp.asarray(env.controller.idx.com_offset, jp.float32)  # trunk frame, m
     gravity = jp.asarray(env.model.opt.gravity, jp.float32)
     base, (q, qd, qdd) = exact_inputs(env.lay, offset, gravity, d)
     oracle = oracle_u(env.lay, d, d.xpos[env.lay.trunk] + base.com)
-    return model_wrench(env.arm_model, base, q, qd, qdd), oracle
+    servo, _ = servo_motion(env.arm_model, base, q, qd, d.ctrl[env.lay.arm_act])
+    return model_wrench(env.arm_model, base, q, qd, qdd), oracle, servo
 
 
 def unmodelled_u(env: DpcEnv, d) -> jax.Array:
     """(6,) what the arms' model cannot know in one env's data `d`: the oracle's u minus the
     model wrench on the exact state, one forward pass (`exact_wrenches`; privileged), world."""
-    model, oracle = exact_wrenches(env, d)
+    model, oracle, _ = exact_wrenches(env, d)
     return oracle - model
+
+
+def felt_u(env: DpcEnv, d) -> jax.Array:
+    """(6,) what the mount feels beyond the arms' servo motion in one env's data `d`: the oracle's
+    u minus the model wrench of the motion the servos cause (`arm_model.servo_motion`) on the
+    exact state and base acceleration (`exact_wrenches`; privileged), world. A push on a
+    yielding arm moves it faster than its servos would; the model wrench a controller computes
+    from the servos' law leaves that part out, and this is what remains of the push at the mount
+    (a stiff arm passes all of it: then `unmodelled_u`)."""
+    _, oracle, servo = exact_wrenches(env, d)
+    return oracle - servo
 
 
 def payload_u(env: DpcEnv, d, payload: jax.Array) -> jax.Array:
@@ -268,12 +292,14 @@ def payload_u(env: DpcEnv, d, payload: jax.Array) -> jax.Array:
     return gravity_u(payload, gravity, d.site_xpos[env.ee_sites], env.com_pos(d))
 
 
-def _wrench_labels(env: DpcEnv, before) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """(u_gravity, u_unmodelled, u_payload), each (B, 6) world, of a batch's state `before`."""
+def _wrench_labels(env: DpcEnv, before) -> tuple[jax.Array, ...]:
+    """(u_gravity, u_unmodelled, u_payload, u_felt), each (B, 6) world, of a batch's state
+    `before` (one forward pass per env for the exact wrenches)."""
     d, payload = before.pipeline_state, before.info["dist"].payload  # payload (B, k) kg
     u_gravity = jax.vmap(env.arm_gravity)(d)
-    u_unmodelled = jax.vmap(lambda x: unmodelled_u(env, x))(d)
-    return u_gravity, u_unmodelled, jax.vmap(lambda x, m: payload_u(env, x, m))(d, payload)
+    model, oracle, servo = jax.vmap(lambda x: exact_wrenches(env, x))(d)
+    u_payload = jax.vmap(lambda x, m: payload_u(env, x, m))(d, payload)
+    return u_gravity, oracle - model, u_payload, oracle - servo
 
 
 def _staggered(state, episode_length: int, burn_in: int, seed: int):
@@ -339,17 +365,15 @@ def collect(
             if i < burn_chunks:  # staggered starts: these rows are dropped
                 pbar.set_postfix_str(f"burn-in {(i + 1) * chunk}/{burn_chunks * chunk} steps")
                 continue
-            obs, u, yaw, drp, keep, grav, unmodelled, payload = (
-                x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out
-            )
-            columns = (obs, drp, ids, u, yaw, grav, unmodelled, payload)
+            obs, u, yaw, drp, keep, *labels = (x[:, :n_envs].reshape(-1, *x.shape[2:]) for x in out)
+            columns = (obs, drp, ids, u, yaw, *labels)
             parts.append(tuple(x[keep] for x in columns))
             kept += int(keep.sum())
             pbar.update(min(int(keep.sum()), samples - pbar.n))
             if kept >= samples:
                 break
     columns = (np.concatenate([p[k] for p in parts])[:samples] for k in range(len(parts[0])))
-    obs, drp, env_id, u_oracle, yaw, u_gravity, u_unmodelled, u_payload = columns  # env_id int32
+    obs, drp, env_id, u_oracle, yaw, u_gravity, u_unmodelled, u_payload, u_felt = columns
     return Dataset(
         s_body=obs[:, layout.s_body],
         s_arm=obs[:, layout.s_arm],
@@ -362,6 +386,7 @@ def collect(
         u_gravity=u_gravity,
         u_unmodelled=u_unmodelled,
         u_payload=u_payload,
+        u_felt=u_felt,
         env_steps=steps,
         seconds=time.perf_counter() - t0,
     )

@@ -18,7 +18,8 @@ u_oracle - u_obs, the part of u the observer's estimate misses, in the same fram
 with 'model' u_unmodelled, what the arms' model cannot know (the oracle's u minus the model
 wrench on the simulator's exact state and accelerations: the pushes and the payload as the mount
 feels them; privileged labels, `Dataset.u_unmodelled`; with `model_target` 'payload' only its
-slow part, the payloads' weight, `Dataset.u_payload`), and
+slow part, the payloads' weight, `Dataset.u_payload`; with 'felt' the oracle's u minus the model
+wrench of the servos' motion, `Dataset.u_felt`), and
 with `slow_s` > 0 only its fast part: minus its exponential average over `slow_s` seconds along
 each episode, `regression_target`); the
 observation statistics start from the same samples. The last `val_fraction` of the samples are
@@ -59,6 +60,7 @@ REGRESSION_TARGETS = {
 MODEL_TARGETS = {
     "unmodelled": REGRESSION_TARGETS["model"],
     "payload": "u_payload (the payloads' weight at the grippers and its moment)",
+    "felt": "u_felt (u_oracle - the model wrench of the servos' motion on the exact state)",
 }
 
 
@@ -164,7 +166,9 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
     trunk's actual acceleration, which the controller leaves to the balance QP on purpose (a
     policy that learns it feeds it back an env step late: docs/results-arm-model.md); with
     `model_target` 'payload' only the payloads' weight wrench (`Dataset.u_payload`), its slow
-    part, leaving the pushes to the balance QP's feedback (`MODEL_TARGETS`). With
+    part, leaving the pushes to the balance QP's feedback; with 'felt' what the mount feels
+    beyond the model wrench of the servos' motion (`Dataset.u_felt`), the wrench the
+    controller's own model (servo law, `arm_estimate`) leaves (`MODEL_TARGETS`). With
     `slow_s` > 0 (s; one
     number, or (force, torque) where 0 keeps that part whole; u_base 'observer' only) the
     residual d = u_oracle - u_obs loses its slow part, its exponential average along each
@@ -185,6 +189,8 @@ def regression_target(  # noqa: PLR0913, PLR0917 (the data, its units, and the t
         u = u - data.u_gravity_in(u_frame)
     elif u_base == "model" and model_target == "payload":  # its slow part (privileged labels)
         u = data.u_payload_in(u_frame)
+    elif u_base == "model" and model_target == "felt":  # what the mount feels (privileged)
+        u = data.u_felt_in(u_frame)
     elif u_base == "model":  # what the arms' model cannot know (privileged labels)
         u = data.u_unmodelled_in(u_frame)
     return np.clip(u / np.asarray(u_scale, np.float32), -U_CLIP, U_CLIP)

@@ -163,8 +163,9 @@ class RunConfig:
     residual_slow_s: float | tuple[float, float] = 0.0
     # With env.u_base='model': what of the unmodelled wrench the regression fits
     # (`policy.regression.MODEL_TARGETS`): 'unmodelled' (the shipped form: the pushes and the
-    # payload as the mount feels them) or 'payload' (the payloads' weight alone, the part that
-    # pays where it is known exactly: docs/results-arm-model.md, "The bounds")
+    # payload as the mount feels them), 'payload' (the payloads' weight alone, the part that
+    # pays where it is known exactly: docs/results-arm-model.md, "The bounds") or 'felt' (what the
+    # mount feels beyond the model wrench of the servos' motion, the controller's own model)
     model_target: str = "unmodelled"
     # the run's one seed; `adapter.seed` and `sac.seed` follow it (the module's docstring)
     seed: int = 0
