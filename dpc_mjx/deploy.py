@@ -20,6 +20,14 @@ One tick:
 Steps 2-4 are one jitted call at batch 1. The controller is that of the export's arm in the
 reaching env built with the export's options (`Deployment.env`; the env is only its vehicle).
 
+What runs where, for an export on the arms' model wrench (`action_scaling.base` 'model', the
+shipped ones): here the controller computes that wrench every tick in JAX (step 4,
+`control/arm_estimate.py`: the arms' model from the robot's file, the measured arm joints, the
+IMU and this tick's `arm_targets`, the balance QP's desired accelerations) and adds it to the
+policy's u of the last policy step, as the env does. A robot that runs the policy with numpy
+alone (`io/inference.py`, no JAX) computes the same wrench with `io/arm_dynamics.py` from the
+export's `arm_model_<arm>.json` and the same inputs (docs/deployment.md).
+
 I/O contract (`Measurement`; frames: world z up, trunk x forward, y left):
 
     quat         (4,)  trunk attitude, trunk -> world, (w, x, y, z) - the IMU's filter output

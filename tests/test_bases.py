@@ -155,9 +155,15 @@ def test_the_shipped_export_of_a_base_is_its_own(base, arm):
     scaled = get_config("reaching", base=base)  # trained with the base's weight-scaled bounds
     np.testing.assert_allclose(artefacts.meta["action_scaling"]["u_scale"], scaled.u_scale)
     runner = NumpyPolicy(export, arm)  # the numpy runner: a finite u within its bounds
-    assert runner.base == "model"  # added to the arms' model wrench (here 0)
-    u = runner.u(np.zeros(runner.input_size, np.float32), u_model=np.zeros(6))
-    assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= np.asarray(scaled.u_scale) + 1e-6)
+    assert runner.base == "model"  # added to the arms' model wrench, from its arm-model file
+    obs = np.zeros(runner.input_size, np.float32)
+    residual = runner.residual(obs)
+    assert np.all(np.isfinite(residual))
+    assert np.all(np.abs(residual) <= np.asarray(scaled.u_scale) + 1e-6)
+    n = runner.arm_model.n  # standing level and still: u_model is the arms' weight (fz < 0)
+    still = {"targets": np.zeros(n), "rot": np.eye(3), "ang_vel": np.zeros(3)}
+    u = runner.u(obs, 0.0, measured=still | {"desired": np.zeros(6), "com": np.zeros(3)})
+    assert np.all(np.isfinite(u)) and u[2] < residual[2]
 
 
 def test_the_commands_take_base(capsys):

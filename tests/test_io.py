@@ -10,6 +10,7 @@ import pathlib
 import shutil
 import subprocess
 import sys
+import types
 
 import jax
 import jax.numpy as jp
@@ -32,10 +33,12 @@ from dpc_mjx.adapter.networks import (
     encode,
     encoder_module,
 )
+from dpc_mjx.control import arm_estimate
+from dpc_mjx.control.arm_model import arm_model
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.observations import S_BODY_NAMES, U_OBS_NAMES
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import inference
+from dpc_mjx.io import arm_dynamics, inference
 from dpc_mjx.io.inference import NumpyPolicy
 from dpc_mjx.policy.policy import (
     POLICY_INPUTS,
@@ -44,10 +47,10 @@ from dpc_mjx.policy.policy import (
     dpc_policy,
     observation_size,
 )
-from dpc_mjx.robots import spec_json
+from dpc_mjx.robots import build, layout, spec_json
 from dpc_mjx.robots.arms import ArmSpec, Mount, UrdfArm
 from dpc_mjx.robots.variants import VARIANTS
-from dpc_mjx.rotations import wrench_to_world
+from dpc_mjx.rotations import wrench_to_world, wrench_to_yaw_frame
 from dpc_mjx.sac import checkpoint
 from dpc_mjx.sac.networks import make_networks
 from dpc_mjx.sac.train import BestPolicy, Carry, SacConfig, TrainingState
@@ -226,6 +229,13 @@ def _edit_sidecar(fn):
         (d / dio.SIDECAR).write_text(json.dumps(meta))
 
     return edit
+
+
+def _without_arm_models(d: pathlib.Path) -> None:
+    """The export `d` as written before the arms' models were recorded."""
+    for entry in json.loads((d / dio.SIDECAR).read_text())["encoders"].values():
+        (d / entry["arm_model"]["file"]).unlink()
+    _edit_sidecar(lambda m: [e.pop("arm_model") for e in m["encoders"].values()])(d)
 
 
 def _truncate(name):
@@ -448,6 +458,8 @@ def test_a_policy_on_the_arms_wrench_adds_the_given_wrench_in_numpy(
     another base refuses one."""
     out = _regular_export(trained, tmp_path / base, ENV_CONFIG.replace(u_base=base))
     assert json.loads((out / "dpc.json").read_text())["action_scaling"]["base"] == base
+    if base == "model":  # as an export written before the arms' models were recorded
+        _without_arm_models(out)
     obs = _obs(N_IN["regular"] + 6, seed=17)
     yaw = np.linspace(-3.0, 3.0, len(obs))
     wrench = {f"u_{base}": np.random.default_rng(3).normal(0.0, 5.0, (len(obs), 6))}  # yaw frame
@@ -460,11 +472,149 @@ def test_a_policy_on_the_arms_wrench_adds_the_given_wrench_in_numpy(
     np.testing.assert_allclose(policy.u(obs, **wrench), wrench[f"u_{base}"] + residual, atol=1e-12)
     with pytest.raises(ValueError, match=f"pass u_{base}"):
         policy.u(obs, yaw)
+    if base == "model":
+        with pytest.raises(ValueError, match=r"before the arms' model.*add_arm_models"):
+            policy.u(obs, yaw)
+        with pytest.raises(ValueError, match="measured is read only by an export"):
+            policy.u(obs, yaw, u_model=wrench["u_model"], measured={"targets": np.zeros(5)})
     with pytest.raises(ValueError, match="base is 'zero'"):
         paper.u(obs, **wrench)
     other = "model" if base == "gravity" else "gravity"
     with pytest.raises(ValueError, match=f"base is '{base}'"):
         policy.u(obs, **wrench, **{f"u_{other}": wrench[f"u_{base}"]})
+
+
+def _tick_inputs(n: int, batch: int, seed: int) -> dict[str, np.ndarray]:
+    """A batch of random tick inputs (`arm_dynamics.MEASURED`): the arm's q, qd and targets
+    near its reference, a tilted trunk, turning, accelerating as a balance QP may ask."""
+    rng = np.random.default_rng(seed)
+    quat = rng.normal(size=(batch, 4)) * [3.0, 0.2, 0.2, 1.0]
+    rot = np.array([arm_dynamics.quat_rot(x) for x in quat])
+    return {
+        "q": rng.uniform(-0.6, 0.6, (batch, n)),
+        "qd": rng.normal(0.0, 1.0, (batch, n)),
+        "targets": rng.uniform(-0.8, 0.8, (batch, n)),
+        "rot": rot,
+        "ang_vel": rng.normal(0.0, 0.5, (batch, 3)),
+        "desired": rng.normal(0.0, 2.0, (batch, 6)),
+        "com": np.einsum("bij,bj->bi", rot, rng.normal(0.0, 0.02, (batch, 3))),
+    }
+
+
+def _controller_u_model(arm: str, x: dict[str, np.ndarray]) -> np.ndarray:
+    """(B, 6) world: the arms' model wrench as the env's controller computes it at a tick
+    (`arm_estimate.update`, its default config: qdd 'servo', base_acc 'desired'), float32."""
+    model = build(arm)
+    jax_arm = arm_model(model, layout(model))
+    f32 = {k: jp.asarray(v, jp.float32) for k, v in x.items()}
+    out = []
+    for i in range(len(x["q"])):
+        s = types.SimpleNamespace(rot=f32["rot"][i], ang_vel=f32["ang_vel"][i])  # measured
+        est = arm_estimate.init(s, f32["qd"][i])
+        measured = (jp.zeros(3), f32["q"][i], f32["qd"][i])  # the accelerometer: unread here
+        est = arm_estimate.update(
+            arm_estimate.ArmEstimateConfig(), jax_arm, est, s, measured, f32["targets"][i],
+            f32["com"][i], f32["desired"][i], 0.004,
+        )  # fmt: skip
+        out.append(np.asarray(est.wrench))
+    return np.array(out)
+
+
+def _model_case(trained, tmp_path: pathlib.Path):
+    """(an export on the arms' model wrench, the tick's inputs of 12 rows, its observations with
+    s_arm the tick's q and qd, the inputs the robot passes, the trunk's heading)."""
+    out = _regular_export(trained, tmp_path / "model", ENV_CONFIG.replace(u_base="model"))
+    x = _tick_inputs(5, batch=12, seed=4)
+    obs = np.array(_obs(N_IN["regular"] + 6, batch=12, seed=19))
+    obs[:, 11:21] = np.concatenate([x["q"], x["qd"]], axis=1)  # s_arm: the tick's q, qd
+    measured = {k: x[k] for k in ("targets", "rot", "ang_vel", "desired", "com")}
+    yaw = np.arctan2(x["rot"][:, 1, 0], x["rot"][:, 0, 0])  # the trunk's heading
+    return out, x, obs, measured, yaw
+
+
+def test_a_policy_on_the_arms_model_computes_it_as_the_controller_does(trained, tmp_path):
+    """u_base='model': the numpy runner's u is the policy's u turned plus the arms' model wrench
+    it computes from the tick's measured inputs, the env controller's (`arm_estimate.update`)
+    to float32's precision, and the u of the same export without the arm-model file given that
+    wrench; an IMU's quaternion and gyro serve as well."""
+    out, x, obs, measured, yaw = _model_case(trained, tmp_path)
+    policy = NumpyPolicy(out, "regular")
+    u_model = _controller_u_model("regular", x)  # world
+    scale = np.abs(u_model).max()
+    got = policy.u(obs, yaw, measured=measured)
+    expected = np.asarray(wrench_to_world(policy.residual(obs), yaw)) + u_model
+    np.testing.assert_allclose(got, expected, atol=1e-4 * scale, rtol=0)
+    np.testing.assert_allclose(policy.model_wrench(x), u_model, atol=1e-4 * scale, rtol=0)
+    in_yaw = np.asarray(wrench_to_yaw_frame(u_model, yaw))  # the policy's frame, as u(obs)
+    np.testing.assert_allclose(
+        policy.u(obs, measured=measured), policy.residual(obs) + in_yaw, atol=1e-4 * scale
+    )
+    old = pathlib.Path(shutil.copytree(out, tmp_path / "old"))
+    _without_arm_models(old)
+    given = NumpyPolicy(old, "regular").u(obs, yaw, u_model=in_yaw)
+    np.testing.assert_allclose(got, given, atol=1e-4 * scale, rtol=0)
+    imu = {
+        **measured,
+        "quat": _quats(x["rot"]),
+        "gyro": np.einsum("bji,bj->bi", x["rot"], x["ang_vel"]),
+    }
+    del imu["rot"], imu["ang_vel"]
+    np.testing.assert_allclose(policy.u(obs, yaw, measured=imu), got, atol=1e-9)
+
+
+def test_a_policy_on_the_arms_model_refuses_to_run_without_its_inputs(trained, tmp_path):
+    """It names every input missing, of a wrong shape or not finite; it refuses a u_model of the
+    caller's, and a policy on another base refuses the inputs."""
+    out, x, obs, measured, yaw = _model_case(trained, tmp_path)
+    policy = NumpyPolicy(out, "regular")
+    with pytest.raises(ValueError, match=r"measured inputs.*missing \['targets', 'rot'"):
+        policy.u(obs, yaw)
+    with pytest.raises(ValueError, match=r"missing \['com'\]"):
+        policy.u(obs, yaw, measured={k: v for k, v in measured.items() if k != "com"})
+    with pytest.raises(ValueError, match=r"wrong shape: \[\('targets', \(12, 4\)\)\]"):
+        policy.u(obs, yaw, measured=measured | {"targets": x["targets"][:, :4]})
+    with pytest.raises(ValueError, match=r"NaN/inf in \['desired'\]"):
+        policy.u(obs, yaw, measured=measured | {"desired": np.full(6, np.nan)})
+    with pytest.raises(ValueError, match="pass measured=, not u_model"):
+        policy.u(obs, yaw, u_model=np.zeros(6), measured=measured)
+    with pytest.raises(ValueError, match=r"missing \['q', 'qd'\]"):
+        policy.model_wrench(measured)  # q and qd: from an observation or given
+    with pytest.raises(ValueError, match="measured is read only by"):
+        NumpyPolicy(_regular_export(trained, tmp_path / "zero", ENV_CONFIG), "regular").u(
+            obs, yaw, measured=measured
+        )
+
+
+def test_the_arm_model_files_are_recorded_and_checked(trained, tmp_path):
+    """The export records the arm's model (arm_model_<arm>.json, its sha256 in the sidecar), so
+    does `add_encoder`; `add_arm_models` writes the same file into an export without it; a file
+    changed since is refused by the runner and by `load`."""
+    out = _model_case(trained, tmp_path)[0]
+    entry = json.loads((out / dio.SIDECAR).read_text())["encoders"]["regular"]["arm_model"]
+    assert entry["file"] == "arm_model_regular.json" and len(entry["joints"]) == 5
+    assert ser.sha256_bytes((out / entry["file"]).read_bytes()) == entry["sha256"]
+    old = pathlib.Path(shutil.copytree(out, tmp_path / "old"))
+    _without_arm_models(old)
+    assert dio.add_arm_models(old) == ["regular"]  # recorded again: the same file
+    assert (old / entry["file"]).read_bytes() == (out / entry["file"]).read_bytes()
+    assert json.loads((old / dio.SIDECAR).read_text())["encoders"]["regular"]["arm_model"] == entry
+    dio.add_encoder(out, "so100", _encoder(5, N_IN["so100"]), "so100")  # its model too
+    so100 = NumpyPolicy(out, "so100")
+    assert so100.arm_model.n == 6 and so100.meta["encoders"]["so100"]["arm_model"]["joints"]
+    (out / entry["file"]).write_text((out / entry["file"]).read_text().replace("0.", "1.", 1))
+    with pytest.raises(ValueError, match="sha256 differs"):
+        NumpyPolicy(out, "regular")
+    with pytest.raises(DpcError, match=r"sha256 differs.*arm model of 'regular'"):
+        dio.load(out)
+
+
+def _quats(rot: np.ndarray) -> np.ndarray:
+    """(B, 4) w, x, y, z of the rotations (B, 3, 3) (w > 0; no rotation near 180 degrees)."""
+    w = np.sqrt(1.0 + np.trace(rot, axis1=1, axis2=2)) / 2.0
+    v = np.stack(
+        [rot[:, 2, 1] - rot[:, 1, 2], rot[:, 0, 2] - rot[:, 2, 0], rot[:, 1, 0] - rot[:, 0, 1]], 1
+    )
+    return np.concatenate([w[:, None], v / (4.0 * w[:, None])], axis=1)
 
 
 def test_numpy_policy_rejects_bad_input(exported, export_copy):
@@ -487,10 +637,18 @@ def test_numpy_policy_rejects_bad_input(exported, export_copy):
         NumpyPolicy(export_copy, "regular")
 
 
-def test_inference_imports_no_jax(exported):
-    """inference.py alone, in a Python where jax and flax cannot be imported, runs an export."""
+def test_inference_imports_no_jax(exported, tmp_path):
+    """inference.py alone, in a Python where jax and flax cannot be imported, runs an export; with
+    arm_dynamics.py next to it, the shipped one (on the arms' model wrench, computed there)."""
     assert inference.FORMAT_VERSION == dio.FORMAT_VERSION
     assert inference.SIDECAR == dio.SIDECAR
+    alone, both = tmp_path / "alone", tmp_path / "both"
+    for folder, files in ((alone, [inference]), (both, [inference, arm_dynamics])):
+        folder.mkdir()
+        for module in files:
+            shutil.copy(module.__file__, folder)
+    old = pathlib.Path(shutil.copytree(SHIPPED, tmp_path / "old"))
+    _without_arm_models(old)
     script = f"""
 import importlib.abc, importlib.util, sys
 class NoJax(importlib.abc.MetaPathFinder):
@@ -499,13 +657,26 @@ class NoJax(importlib.abc.MetaPathFinder):
             raise ImportError(f"inference.py imported {{name}}")
 sys.meta_path.insert(0, NoJax())
 import numpy as np
-spec = importlib.util.spec_from_file_location("dpc_inference", {inference.__file__!r})
-mod = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(mod)
-for folder in ({str(exported)!r}, {str(SHIPPED)!r}):
-    policy = mod.NumpyPolicy(folder, "regular")
-    given = {{"u_model": np.zeros(6)}} if policy.base == "model" else {{}}  # the shipped: model
-    assert policy.u(np.zeros(32), 0.5, **given).shape == (6,)  # [s_body, s_arm, p_arm, u_obs]
+def runner(folder):
+    path = f"{{folder}}/inference.py"
+    spec = importlib.util.spec_from_file_location(f"dpc_inference_{{len(sys.modules)}}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+alone, both = runner({str(alone)!r}), runner({str(both)!r})
+still = {{"targets": np.zeros(5), "rot": np.eye(3), "gyro": np.zeros(3)}}
+still |= {{"desired": np.zeros(6), "com": np.zeros(3)}}
+obs = np.zeros(32)  # [s_body, s_arm, p_arm, u_obs]
+assert alone.NumpyPolicy({str(exported)!r}, "regular").u(obs, 0.5).shape == (6,)
+old = alone.NumpyPolicy({str(old)!r}, "regular")  # on the model, written before its file
+assert old.u(obs, 0.5, u_model=np.zeros(6)).shape == (6,)
+try:
+    alone.NumpyPolicy({str(SHIPPED)!r}, "regular")
+    raise AssertionError("ran without arm_dynamics.py")
+except ValueError as e:
+    assert "copy dpc_mjx/io/arm_dynamics.py there" in str(e), e
+shipped = both.NumpyPolicy({str(SHIPPED)!r}, "regular")
+assert shipped.u(obs, 0.5, measured=still).shape == (6,)
 assert "jax" not in sys.modules
 loaded = [m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib", "flax", "dpc_mjx")]
 assert not loaded, loaded
@@ -573,6 +744,7 @@ def _set(*keys, value):
 
 
 _NAMES = list(S_BODY_NAMES)
+_SHIPPED_META = json.loads((SHIPPED / dio.SIDECAR).read_text())
 _BIG_S_BODY = {"start": 0, "stop": 12, "names": [*_NAMES, "extra"]}
 _SWAPPED = [*_NAMES[:5], "vy", "vx", *_NAMES[7:], "z_0", "z_1"]
 SIDECAR_DISAGREES = {  # one field of dpc.json against another (or this library)
@@ -619,6 +791,16 @@ SIDECAR_DISAGREES = {  # one field of dpc.json against another (or this library)
     "u_scale vs env_config bounds": (
         _set("action_scaling", "u_scale", value=[16.0, 15.0, 60.0, 12.0, 12.0, 3.0]),
         ["dpc.json", "u_scale is [16.0,", "max_torque", "gives [15.0,", "re-export"],
+    ),
+    "arm_model entry vs its form": (
+        _set("encoders", "regular", "arm_model", value={"file": 3}),
+        ["dpc.json", "encoders.regular.arm_model is", "only on base 'model'", "re-export"],
+    ),
+    "arm model joints vs encoder input_size": (
+        _set(
+            "encoders", "regular", "arm_model", value=_SHIPPED_META["encoders"]["z1"]["arm_model"]
+        ),
+        ["arm_model_z1.json", "so an input of 32", "input_size is 26", "re-export"],
     ),
     "sac_config hidden vs policy hidden": (
         _set("sac_config", "hidden", value=[64, 64]),
@@ -721,9 +903,10 @@ def test_shipped_export_records_its_layout_and_old_sidecars_still_load(shipped_c
     a, a_old = art.dpc_policy("regular")(obs, None), old.dpc_policy("regular")(obs, None)
     np.testing.assert_array_equal(np.asarray(a), np.asarray(a_old))
     yaw = np.linspace(-1.0, 1.0, len(obs))
-    u_model = np.tile(np.arange(6.0), (len(obs), 1))  # N, N·m: the shipped export's base
+    measured = {"targets": obs[:, 21:26], "rot": np.eye(3), "ang_vel": np.ones(3)}
+    measured |= {"desired": np.arange(6.0), "com": np.zeros(3)}  # the shipped export's base
     np.testing.assert_array_equal(
-        old_numpy.u(obs, yaw, u_model=u_model), numpy_policy.u(obs, yaw, u_model=u_model)
+        old_numpy.u(obs, yaw, measured=measured), numpy_policy.u(obs, yaw, measured=measured)
     )
     assert old_numpy.s_body == slice(0, 11)
 

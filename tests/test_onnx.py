@@ -49,10 +49,10 @@ README_ONNX = "ort.InferenceSession("  # the README's onnxruntime snippet holds 
 
 
 def graph_u(policy: NumpyPolicy, obs: np.ndarray) -> np.ndarray:
-    """What the graph gives: `policy.u(obs)`, with a zero wrench where the robot adds its own
-    (action_scaling.base 'gravity' or 'model': the shipped exports' 'model')."""
-    given = {f"u_{policy.base}": np.zeros(6)} if policy.base in ("gravity", "model") else {}
-    return policy.u(obs, **given)
+    """What the graph gives: `policy.u(obs)`, or where the robot adds a wrench of its own
+    (action_scaling.base 'gravity' or 'model': the shipped exports' 'model') the policy's part,
+    `policy.residual(obs)`."""
+    return policy.residual(obs) if policy.base in ("gravity", "model") else policy.u(obs)
 
 
 def _observations() -> dict[str, np.ndarray]:

@@ -8,10 +8,13 @@ An export is a folder:
     policy.msgpack           `PolicyState` (actor params, observation statistics)
     decoder.msgpack          `DecoderState`
     encoder_<arm>.msgpack    `EncoderState`, one per arm
+    arm_model_<arm>.json     the arm's rigid-body model, one per arm, where the policy's u is
+                             added to the arms' model wrench (action_scaling.base 'model')
 
 The modules, by role:
 
-    export.py         export, add_encoder: the networks checked against each other, then written
+    export.py         export, add_encoder, add_arm_models: the networks checked against each
+                      other, then written; the arms' models
     load.py           load -> Artefacts: the sidecar checked against itself and every size it
                       declares against its file, then the networks restored; stale, truncated or
                       mismatched files fail with a message saying what to do
@@ -21,11 +24,13 @@ The modules, by role:
     serialization.py  old path of `dpc_mjx.serialization` (checked, atomic msgpack and JSON)
     inference.py      NumpyPolicy: runs an export with numpy + msgpack only (copy the file alone to
                       a robot's computer; it imports nothing else, not even this package)
+    arm_dynamics.py   the arms' model wrench with numpy alone, from arm_model_<arm>.json (copy it
+                      next to inference.py for an export on the arms' model wrench)
 """
 
 from dpc_mjx.envs.observations import S_BODY_NAMES
 from dpc_mjx.io import serialization
-from dpc_mjx.io.export import add_encoder, export
+from dpc_mjx.io.export import add_arm_models, add_encoder, export
 from dpc_mjx.io.load import Artefacts, load
 from dpc_mjx.io.sidecar import DECODER_FILE, FORMAT_VERSION, POLICY_FILE, REEXPORT, SIDECAR
 
@@ -37,6 +42,7 @@ __all__ = [
     "S_BODY_NAMES",
     "SIDECAR",
     "Artefacts",
+    "add_arm_models",
     "add_encoder",
     "export",
     "load",

@@ -1,13 +1,21 @@
 """Writing an export: `export` (policy, decoder, one encoder per arm, the sidecar) and
 `add_encoder` (one more arm). The networks are checked against each other and the sidecar
 against itself (`sidecar_checks.check`, what `load` checks) before any file is written.
+
+An export on the arms' model wrench (`action_scaling.base` 'model') also holds each arm's
+rigid-body model, `arm_model_<arm>.json` (`arm_model_json`: `control.arm_model.ArmModel`'s
+numbers, the env's, for `io/arm_dynamics.py`, which computes the wrench with numpy alone),
+recorded as `encoders.<arm>.arm_model` {file, sha256}; `add_arm_models` writes them into an
+export written before they were.
 """
 
 from __future__ import annotations
 
+import json
 import pathlib
 from collections.abc import Mapping
 
+import mujoco
 import numpy as np
 
 from dpc_mjx.adapter.networks import (
@@ -17,12 +25,22 @@ from dpc_mjx.adapter.networks import (
     decoder_template,
     encoder_template,
 )
+from dpc_mjx.control.arm_model import arm_model
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import sidecar, sidecar_checks
+from dpc_mjx.io import arm_dynamics, sidecar, sidecar_checks
 from dpc_mjx.policy.policy import PolicyState, policy_template
-from dpc_mjx.robots.spec_json import ArmLike
-from dpc_mjx.serialization import check_tree, jsonable, write_json, write_msgpack
+from dpc_mjx.robots import build, layout
+from dpc_mjx.robots.spec_json import ArmLike, arm_from_json
+from dpc_mjx.robots.variants import on_base, resolve
+from dpc_mjx.serialization import (
+    check_tree,
+    jsonable,
+    sha256_bytes,
+    write_bytes,
+    write_json,
+    write_msgpack,
+)
 from dpc_mjx.writer import is_writer
 
 
@@ -95,15 +113,24 @@ def export(
         "decoder",
         "Pass the decoder trained with this adapter config.",
     )
+    models = _arm_models(arms, env_config or EnvConfig())  # before any file is written
     if not is_writer():
         return out
     out.mkdir(parents=True, exist_ok=True)
     for arm, entry in entries.items():
         entry["sha256"] = write_msgpack(out / entry["file"], encoders[arm])
+    _record_arm_models(out, entries, models)
     meta["policy"]["sha256"] = write_msgpack(out / sidecar.POLICY_FILE, policy)
     meta["decoder"]["sha256"] = write_msgpack(out / sidecar.DECODER_FILE, decoder)
     write_json(out / sidecar.SIDECAR, meta)
     return out
+
+
+def _arm_models(arms: Mapping[str, ArmLike], env_config: EnvConfig) -> dict[str, dict]:
+    """Each arm's `arm_model_json` where the policy's u is added to the arms' model wrench."""
+    if env_config.u_base != "model":
+        return {}
+    return {arm: arm_model_json(arm, spec, env_config.base) for arm, spec in arms.items()}
 
 
 def add_encoder(
@@ -126,7 +153,12 @@ def add_encoder(
             "overwrite it, or add it under another name."
         )
     entry = _encoder_entry(declared.config, arm, encoder, arm_spec)
+    model = None
+    if meta["action_scaling"].get("base") == "model":
+        model = arm_model_json(arm, arm_spec, _base_of(meta))
     entry["sha256"] = write_msgpack(out / entry["file"], encoder)
+    if model is not None:
+        entry["arm_model"] = _write_arm_model(out, arm, model)
     meta["encoders"] = {**meta["encoders"], arm: entry}
     meta["updated"] = sidecar.now()
     write_json(out / sidecar.SIDECAR, meta)
@@ -151,3 +183,87 @@ def _encoder_entry(
         f"hidden sizes be {list(config.hidden)}; pass the encoder trained with this adapter.",
     )
     return entry
+
+
+def add_arm_models(out_dir: str | pathlib.Path, *, replace: bool = False) -> list[str]:
+    """Write the arm-model file of every arm of an export on the arms' model wrench
+    (`action_scaling.base` 'model') that lacks one (`replace=True`: every arm), from its
+    sidecar's arm spec and base, and record it in the sidecar (rewritten atomically; the
+    networks' files untouched). Returns the arms written."""
+    out = pathlib.Path(out_dir)
+    meta = sidecar.read(out)
+    sidecar_checks.check(meta, out / sidecar.SIDECAR)
+    if meta["action_scaling"].get("base") != "model":
+        raise DpcError(
+            f"The export {out} adds its policy's u to {meta['action_scaling'].get('base')!r}, "
+            "not the arms' model wrench (action_scaling.base 'model'): it needs no arm model."
+        )
+    todo = [a for a, e in meta["encoders"].items() if replace or "arm_model" not in e]
+    models = {
+        a: arm_model_json(a, arm_from_json(meta["encoders"][a]["arm_spec"]), _base_of(meta))
+        for a in todo
+    }
+    _record_arm_models(out, meta["encoders"], models)
+    if todo:
+        meta["updated"] = sidecar.now()
+        write_json(out / sidecar.SIDECAR, meta)
+    return todo
+
+
+def arm_model_json(arm: str, arm_spec: ArmLike, base: str) -> dict:
+    """The arm-model file of `arm_spec` on `base` (`io/arm_dynamics.py` reads it): the
+    `ArmModel` the env's controller uses (`control.controller.make_controller`: `arm_model` of
+    the compiled robot), its float32 numbers exactly, each joint's kind and name; a bound of
+    ±inf is null (none)."""
+    model = build(on_base(resolve(arm_spec), base))
+    lay = layout(model)
+    if not lay.arms or len(lay.arm_act) != len(lay.arm_dof):
+        raise DpcError(
+            f"Arm {arm!r} has {len(lay.arm_dof)} joints and {len(lay.arm_act)} servos: the arms' "
+            "model wrench needs an arm with one position servo per joint."
+        )
+    am = arm_model(model, lay)
+    kind = {int(mujoco.mjtJoint.mjJNT_HINGE): "hinge", int(mujoco.mjtJoint.mjJNT_SLIDE): "slide"}
+    numbers = {k: np.asarray(getattr(am, k), np.float64).tolist() for k in arm_dynamics.SHAPES}
+    bounds = {
+        k: [None if np.isinf(v) else float(v) for v in np.asarray(getattr(am, k), np.float64)]
+        for k in arm_dynamics.BOUNDS
+    }
+    names = lambda ids, of: [of(int(i)).name for i in ids]  # noqa: E731
+    return {
+        "format": arm_dynamics.FILE_FORMAT,
+        "format_version": arm_dynamics.FILE_VERSION,
+        "arm": arm,
+        "base": str(base),
+        "about": "dpc_mjx.control.arm_model.ArmModel of the arms on the base: bodies in tree "
+        "order, positions and rotations in the parent's frame at q_ref; SI units (kg, m, rad, "
+        "N·m); a null bound: none. Read by dpc_mjx/io/arm_dynamics.py",
+        "joints": names(lay.arm_dof, lambda i: model.joint(model.dof_jntid[i])),
+        "actuators": names(lay.arm_act, model.actuator),
+        "bodies": names(lay.arm_bodies, model.body),
+        "parent": list(am.parent),
+        "joint": [kind[j] if k >= 0 else "weld" for j, k in zip(am.joint, am.qadr, strict=True)],
+        "qadr": list(am.qadr),
+        **numbers,
+        **bounds,
+    }
+
+
+def _record_arm_models(out: pathlib.Path, entries: dict, models: dict[str, dict]) -> None:
+    """Write each arm's model (`arm_model_json`) and record it in its sidecar entry."""
+    for arm, model in models.items():
+        entries[arm]["arm_model"] = _write_arm_model(out, arm, model)
+
+
+def _write_arm_model(out: pathlib.Path, arm: str, model: dict) -> dict:
+    """Write `model` (`arm_model_json`) as `arm_model_<arm>.json`: its sidecar entry."""
+    arm_dynamics.arm_model_from_json(model, f"arm model of {arm!r}")  # what the reader accepts
+    name = sidecar.arm_model_file(arm)
+    data = (json.dumps(model, indent=1, allow_nan=False) + "\n").encode()
+    write_bytes(out / name, data)
+    return {"file": name, "sha256": sha256_bytes(data), "joints": model["joints"]}
+
+
+def _base_of(meta: dict) -> str:
+    """The base an export was trained on (its env_config's; none recorded: the A1)."""
+    return str((meta.get("env_config") or {}).get("base", EnvConfig().base))

@@ -24,9 +24,10 @@ other dpc_mjx module), so it can be copied alone next to an export folder writte
         weight and its torque about the base's COM at their present pose (from the arm's masses
         and kinematics; the robot computes it), in the policy's frame: `u(obs, yaw, u_gravity)`
     u = u_model + u_scale * a where action_scaling.base is 'model': u_model the arms' model
-        wrench of the tick (their inverse dynamics from the measured joint and trunk states:
-        `dpc_mjx.control.arm_estimate`; the robot computes it), in the policy's frame:
-        `u(obs, yaw, u_model=)`
+        wrench of the tick (world; `dpc_mjx.control.arm_estimate`), computed by arm_dynamics.py
+        (copy it next to this file) from `arm_model_<arm>.json` and the tick's inputs:
+        `u(obs, yaw, measured={...})`, `model_wrench(measured)` (`arm_dynamics.MEASURED`). An
+        export written before that file: `u(obs, yaw, u_model=)`, u_model in the policy's frame
 
 Every size and the layout come from the sidecar: s_body = obs[start:stop] with
 `observation.s_body` {start, stop, names} (a sidecar written before that key existed has s_body
@@ -42,9 +43,12 @@ Computation is in float64. Any problem with the files or the input raises `Value
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.util
 import json
 import pathlib
+import sys
 
 import msgpack
 import numpy as np
@@ -206,6 +210,7 @@ class NumpyPolicy:
                 f"{action_size} actions; re-export the artefacts."
             )
         self.scale = np.array(u_scale)  # N (f_a), N·m (tau_a)
+        self.arm_model, self._no_model = _arm_model(meta, d, arm, input_size, n_body)
 
         tree = read_tree(enc_path, enc.get("sha256"))
         mlp = _get(tree, ("params", "params", "mlp"), enc_path)
@@ -287,41 +292,102 @@ class NumpyPolicy:
             )
         return self._action(x) * self.scale
 
-    def u(self, obs, yaw=None, u_gravity=None, u_model=None) -> np.ndarray:
+    def u(self, obs, yaw=None, u_gravity=None, u_model=None, measured=None) -> np.ndarray:
         """u = [f_a (3, N), tau_a (3, N·m)] (..., 6) about the base's COM: `residual(obs)`, plus
         the observation's u_obs where `base` is 'observer', `u_gravity` (..., 6; the arms'
-        weight and its torque at their pose) where it is 'gravity', `u_model` (..., 6; the arms'
-        model wrench of the tick) where it is 'model', N and N·m in the policy's frame. Without
-        `yaw`, in the policy's frame (`frame`), what the ONNX graph gives (the residual); with
-        the heading `yaw` (rad; () or (B,)), in the world frame: a yaw-frame policy's u turned,
-        [R_z(yaw) f, R_z(yaw) tau] (a world-frame one as it is)."""
+        weight at their pose) where it is 'gravity', where it is 'model' the arms' model wrench:
+        from `measured` (`model_wrench`) where the export has the arm's model, else `u_model`
+        (..., 6); given wrenches in the policy's frame. Without `yaw`, in the policy's frame
+        (`frame`; a computed u_model turned by measured's heading); with the heading `yaw` (rad;
+        () or (B,)), world: a yaw-frame policy's u turned, [R_z(yaw) f, R_z(yaw) tau]."""
         x = self._obs(obs)
         u = self._residual(x)
         if self.base == "observer":  # x holds u_obs (`_obs` checked its size)
             u = u + x[..., self.input_size : self.input_size + _U_OBS_SIZE]
+        computes = self.arm_model is not None
         given = {"gravity": u_gravity, "model": u_model}
         for base, wrench in given.items():
-            if base == self.base and wrench is None:
+            if base == self.base and computes == (wrench is not None):
+                fix = f"pass u_{base} (..., 6), N and N·m about the base's COM, policy's frame."
+                fix = "pass measured=, not u_model: its arm model gives it." if computes else fix
                 raise ValueError(
                     f"This policy's u is added to {_ADDED[base]} (action_scaling.base "
-                    f"{base!r}): pass u_{base} (..., 6), N and N·m about the base's COM in the "
-                    "policy's frame."
+                    f"{base!r}): {fix}{self._no_model or ''}"
                 )
             if base != self.base and wrench is not None:
                 raise ValueError(
                     f"u_{base} is added only to a policy on {_ADDED[base]}; this policy's base "
                     f"is {self.base!r}: leave u_{base} out."
                 )
-        if self.base in given:
+        if self.base in given and not computes:
             u = u + np.broadcast_to(np.asarray(given[self.base], np.float64), u.shape)
-        if self.frame == "world" or yaw is None:
-            return u
-        c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))
-        out = u.copy()
-        for i in (0, 3):  # force, then torque: R_z(yaw) v
-            out[..., i] = c * u[..., i] - s * u[..., i + 1]
-            out[..., i + 1] = s * u[..., i] + c * u[..., i + 1]
-        return out
+        world, heading = 0.0, None  # the computed u_model (world) and the heading it is at
+        if computes or measured is not None:
+            world, heading = self._model_wrench(measured, x)
+        if self.frame == "yaw" and yaw is None and heading is not None:
+            world = _turn(world, -heading)  # to the policy's frame
+        return u + world if self.frame == "world" or yaw is None else _turn(u, yaw) + world
+
+    def model_wrench(self, measured, obs=None) -> np.ndarray:
+        """u_model (..., 6), world frame, N and N·m about the base's COM: the arms' model
+        wrench of the tick (`arm_dynamics.tick_wrench`) from `measured`, a dict of the tick's
+        inputs (`arm_dynamics.MEASURED`; leading batch axes allowed), q and qd where absent
+        the raw observation `obs`'s s_arm. `ValueError` naming what is missing."""
+        return self._model_wrench(measured, None if obs is None else self._obs(obs))[0]
+
+    def _model_wrench(self, measured, x) -> tuple[np.ndarray, np.ndarray]:
+        """(u_model (..., 6) world, the heading (...) rad of measured's rot)."""
+        if self.arm_model is None:
+            raise ValueError(
+                "measured is read only by an export on the arms' model wrench that records the "
+                f"arm's model.{self._no_model or f' This policy is on {self.base!r}.'}"
+            )
+        n, start = self.arm_model.n, self.s_body.stop
+        s_arm = [] if x is None else np.split(x[..., start : start + 2 * n], 2, axis=-1)
+        inputs = _dynamics().tick_inputs(
+            self.arm_model, {**dict(zip(("q", "qd"), s_arm)), **(measured or {})}
+        )
+        heading = np.arctan2(inputs["rot"][..., 1, 0], inputs["rot"][..., 0, 0])
+        return _dynamics().tick_wrench(self.arm_model, inputs), heading
+
+
+def _turn(u: np.ndarray, yaw) -> np.ndarray:
+    """[R_z(yaw) f, R_z(yaw) tau] of u (..., 6)."""
+    c, s = np.cos(np.asarray(yaw, np.float64)), np.sin(np.asarray(yaw, np.float64))
+    out = np.array(u, np.float64)
+    for i in (0, 3):  # force, then torque
+        out[..., i] = c * u[..., i] - s * u[..., i + 1]
+        out[..., i + 1] = s * u[..., i] + c * u[..., i + 1]
+    return out
+
+
+@functools.cache
+def _dynamics():
+    """`arm_dynamics.py`: the package's, or the copy next to this file (a robot's computer)."""
+    if __package__:  # dpc_mjx.io
+        return importlib.import_module(f"{__package__}.arm_dynamics")
+    path = pathlib.Path(__file__).with_name("arm_dynamics.py")
+    if not path.is_file():
+        raise ValueError(
+            f"An export on the arms' model wrench needs {path.name} next to {__file__}: copy "
+            "dpc_mjx/io/arm_dynamics.py there (numpy only, like this file)."
+        )
+    spec = importlib.util.spec_from_file_location("dpc_arm_dynamics", path)
+    module = sys.modules["dpc_arm_dynamics"] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _arm_model(meta: dict, d: pathlib.Path, arm: str, n_in: int, n_body: int):
+    """(the arm's model, None) of a 'model' export, or (None, why u_model must be given)."""
+    if meta["action_scaling"].get("base") != "model":
+        return None, None
+    if "arm_model" not in meta["encoders"][arm]:
+        return None, (
+            f" This export was written before the arms' model was recorded (no encoders.{arm}."
+            "arm_model in its sidecar); dpc_mjx.io.add_arm_models(DIR) records it."
+        )
+    return _dynamics().from_export(meta, d, arm, n_in, n_body)
 
 
 # The wrenches a robot computes and passes to `NumpyPolicy.u`, by action_scaling.base

@@ -28,7 +28,7 @@ from dpc_mjx.adapter.networks import (
     encoder_template,
 )
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import sidecar, sidecar_checks
+from dpc_mjx.io import arm_dynamics, sidecar, sidecar_checks
 from dpc_mjx.io.sidecar import REEXPORT, SIDECAR
 from dpc_mjx.io.sidecar_checks import Declared
 from dpc_mjx.policy.policy import PolicyState, dpc_policy, policy_template
@@ -76,6 +76,8 @@ def load(out_dir: str | pathlib.Path) -> Artefacts:
     policy = _read(out, _policy_file(d))
     decoder = _read(out, _decoder_file(d))
     encoders = {arm: _read(out, _encoder_file(d, arm)) for arm in d.input_sizes}
+    for arm in d.input_sizes:
+        _check_arm_model(out, d, arm)
     sidecar_checks.check_records(d)
     return Artefacts(d.config, policy, decoder, encoders, d.meta)
 
@@ -253,6 +255,26 @@ def _read(out: pathlib.Path, f: _File) -> Any:
                 )
     sha256 = f.entry.get("sha256")
     return ser.restore(path, data, state, f.template, f.what, sha256=sha256, hint=f.hint)
+
+
+def _check_arm_model(out: pathlib.Path, d: Declared, arm: str) -> None:
+    """The arm-model file of `arm`, where the sidecar records one: its sha256, its fields
+    (`arm_dynamics.read_arm_model`) and its joints against the encoder's input size."""
+    entry = d.meta["encoders"][arm].get("arm_model")
+    if entry is None:
+        return
+    path = _file(out, entry, f"encoders.{arm}.arm_model")
+    try:
+        model = arm_dynamics.read_arm_model(path, entry["sha256"])
+    except ValueError as e:
+        raise DpcError(f"{e} (the arm model of {arm!r}); {REEXPORT}.") from e
+    n_in = d.s_body.stop + 3 * model.n  # [s_body, q, qd, targets]
+    if d.input_sizes[arm] != n_in or entry.get("joints", list(model.joints)) != list(model.joints):
+        raise DpcError(
+            f"{path} ({arm!r}'s arm model) has the joints {list(model.joints)}, so an input of "
+            f"{n_in} [s_body, s_arm (2 n), p_arm (n)], but encoders.{arm}.input_size is "
+            f"{d.input_sizes[arm]} (joints {entry.get('joints')}); {REEXPORT}."
+        )
 
 
 def _node(state: Any, dotted: str) -> Any:

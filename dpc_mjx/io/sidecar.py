@@ -17,7 +17,11 @@ Keys (format_version 1; `export` writes them all):
                     sizes), observation_layout (s_body's names, z_0 .., then u_obs's names),
                     activation, input, output}
     decoder         {file, sha256, latent_size, out_size, sees_body, target_layout}
-    encoders        {arm: {file, input_size, input_layout, arm_spec, sha256}}
+    encoders        {arm: {file, input_size, input_layout, arm_spec, sha256, arm_model}}:
+                    arm_model {file: arm_model_<arm>.json, sha256, joints} where
+                    action_scaling.base is 'model' (the arm's rigid-body model, `export.
+                    arm_model_json`, that `arm_dynamics.py` computes u_model from; absent in
+                    exports written before it: the robot passes u_model)
     action_scaling  {u_scale (action_size,): N for f_a, N·m for tau_a; frame: 'yaw' or 'world'
                     (env_config.u_frame; absent: world); base: 'zero', 'observer', 'gravity'
                     or 'model' (env_config.u_base; absent: zero), with 'observer' also
@@ -98,6 +102,11 @@ def observation_meta() -> dict:
         "policy_input": "policy.inputs of s_body, z (adapter_config.latent_size), u_obs: "
         "policy.observation_layout",
     }
+
+
+def arm_model_file(arm: str) -> str:
+    """The name of `arm`'s arm-model file (`encoders.<arm>.arm_model.file`)."""
+    return f"arm_model_{arm}.json"
 
 
 def encoder_entry(arm: str, input_size: int, arm_spec: ArmLike) -> dict:

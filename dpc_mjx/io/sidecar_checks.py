@@ -98,6 +98,7 @@ def check(meta: dict, path: pathlib.Path) -> Declared:
                 f"at {s_body.stop}: an encoder's input [s_body, s_arm, p_arm] holds s_body; use "
                 f"the encoder trained for this arm or {REEXPORT}."
             )
+        _check_arm_model(meta, arm, path)
     _check_scaling(meta, path, action_size)
     _check_base(meta, path)
     return Declared(
@@ -206,6 +207,20 @@ def _check_base(meta: dict, path: pathlib.Path) -> None:
     env = meta.get("env_config")
     if isinstance(env, dict):
         _same(path, "action_scaling.base", base, env.get("u_base", "zero"), "env_config.u_base")
+
+
+def _check_arm_model(meta: dict, arm: str, path: pathlib.Path) -> None:
+    """encoders.<arm>.arm_model, where present: {file, sha256, ...}, only on base 'model'."""
+    entry = meta["encoders"][arm].get("arm_model")
+    if entry is None:
+        return  # none, or an export written before the arms' models were recorded
+    base = meta["action_scaling"].get("base", "zero")
+    ok = isinstance(entry, dict) and isinstance(entry.get("file"), str)
+    if not ok or not isinstance(entry.get("sha256"), str) or base != "model":
+        raise DpcError(
+            f"{path}: encoders.{arm}.arm_model is {_json(entry)} with action_scaling.base "
+            f"{_json(base)}: it must be {{file, sha256}} and only on base 'model'; {REEXPORT}."
+        )
 
 
 def _same(path: pathlib.Path, field: str, value: Any, expected: Any, source: str) -> None:
