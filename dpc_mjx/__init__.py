@@ -8,7 +8,7 @@ things before any subpackage can start jax:
   ..." (printed when the optional GPU backend is absent; we use MJX's JAX backend) off stdout,
   wherever mjx is first imported (by dpc_mjx, by brax or by you): a finder that wraps the one
   module `mujoco.mjx.warp` and leaves `sys.meta_path` once that module has loaded.
-The subpackages, `make` and `sweep` load on first use (PEP 562 `__getattr__`).
+The subpackages, `make`, `sweep` and `Controller` load on first use (PEP 562 `__getattr__`).
 """
 
 from __future__ import annotations
@@ -26,14 +26,19 @@ from dpc_mjx.errors import DpcError
 
 xla_flags.apply()
 
-# Loaded on first use: subpackages (and the modules deploy, physics) by name, functions from
-# their module.
+# Loaded on first use: subpackages (and the modules deploy, physics) by name, functions (and the
+# `Controller` names) from their module.
 _SUBMODULES = frozenset(
     ("adapter", "control", "deploy", "envs", "io", "physics", "policy", "robots", "run", "sac")
 )
-_FUNCTIONS = {"make": "dpc_mjx.envs", "sweep": "dpc_mjx.run.sweep"}
+_FUNCTIONS = {
+    "make": "dpc_mjx.envs",
+    "sweep": "dpc_mjx.run.sweep",
+    "Controller": "dpc_mjx.controllers",
+}
 
 __all__ = [
+    "Controller",
     "DpcError",
     "__version__",
     "adapter",

@@ -2,6 +2,7 @@
 
     python experiments/carry_over.py [--export dpc_mjx/artefacts/regular] [--base go1]
         [--arm regular] [--samples 10000] [--episodes 128] [--seed 33000] [--engine native]
+        [--controllers mbc observer feedforward feedforward_observer dpc oracle]
 
 The paper's transfer step (`run.pipeline.transfer_arm`: random-motion samples under MBC, a new
 encoder trained against the frozen decoder), but on the base `--base` instead of the one the
@@ -24,6 +25,7 @@ import sys
 import tempfile
 
 from dpc_mjx import io
+from dpc_mjx.controllers import Controller
 from dpc_mjx.io.shipped import SHIPPED, env_overrides
 from dpc_mjx.run.eval import evaluate_table
 from dpc_mjx.run.pipeline import transfer_arm
@@ -38,6 +40,7 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=128)
     p.add_argument("--seed", type=int, default=33000, help="the evaluation's first episode")
     p.add_argument("--engine", default="native")
+    p.add_argument("--controllers", nargs="+", default=list(Controller), choices=list(Controller))
     a = p.parse_args()
     print(f"`python {shlex.join(sys.argv)}`\n", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
@@ -46,7 +49,7 @@ def main() -> None:
         transfer_arm(export, a.arm, samples=a.samples, env=options)
         artefacts = io.load(export)
         evaluate_table(
-            [artefacts.arm_spec(a.arm)], ["mbc", "dpc", "oracle"], episodes=a.episodes,
+            [artefacts.arm_spec(a.arm)], a.controllers, episodes=a.episodes,
             seed=a.seed, dpc_policy_for=artefacts.dpc_policy,
             overrides={**env_overrides(artefacts), **options},
         )  # fmt: skip

@@ -9,8 +9,9 @@ trained, on MBC random-motion samples of the new arm. One collection of max(budg
 (seed `--data-seed`); each budget's encoder is trained on its first n samples (nested subsets:
 what a collection of n samples with the same 64 envs gives, i.e. n / 64 steps of each env).
 Every controller runs the same `--episodes` episodes of the reaching task (seeds `--seed`..,
-under the export's env options: yaw-frame u, the robot's sensors): MBC, the observer and the
-oracle (given the measured mount wrench: privileged) once, DPC once per budget, and with
+under the export's env options: yaw-frame u, the robot's sensors): MBC, the observer, the arms'
+model fed forward with and without the observer and the oracle (given the measured mount wrench:
+privileged) once, DPC once per budget, and with
 `--full`, the DPC of a policy trained from scratch for this arm with the whole pipeline.
 Prints one table: falls, fall rate and return with 95% intervals, the paired return difference
 against MBC on the same episodes, and with `--full` the share of the full policy's gain over MBC
@@ -85,7 +86,7 @@ def main() -> None:
         show(c)
         return c
 
-    cells = run(["mbc", "observer", "oracle"])
+    cells = run(["mbc", "observer", "feedforward", "feedforward_observer", "oracle"])
     for n in sorted(args.budgets):
         encoder, history = adapter.transfer(data.take(slice(0, n)), art.decoder, config)
         print(f"{n:,} samples: held-out NLL {min(history['val_nll']):.3f}", flush=True)
