@@ -8,7 +8,9 @@ use the names of earlier ones). Two snippets need more than the page gives them:
   one, and each must occur in the snippet exactly once, so an edit of the page that drops one
   fails here instead of training for hours); it is `slow` (a dozen compiles);
 - the deployment loop gets `measurement`, the robot's reading: what exact sensors read on the
-  shipped export's robot standing at its home pose (tests/test_deploy.py has noisy ones).
+  shipped export's robot standing at its home pose (tests/test_deploy.py has noisy ones);
+- the numpy runner gets the shipped export for "export/", a zero observation but for the arm's
+  joints at their reference, and a robot standing level and still (`_still_robot`).
 `test_every_snippet_is_run` fails on a snippet that no test runs (the README's ONNX snippet runs in
 tests/test_onnx.py). The default suite runs the deployment snippet (its compile is
 tests/test_deploy.py's, from the compilation cache) and imports every name the snippets import;
@@ -31,6 +33,9 @@ import pytest
 from test_sac import _CONFIG
 
 from dpc_mjx.deploy import Measurement
+from dpc_mjx.io import arm_dynamics
+from dpc_mjx.io.inference import NumpyPolicy
+from dpc_mjx.io.shipped import SHIPPED
 from dpc_mjx.robots import build, layout
 from dpc_mjx.run import cli
 
@@ -43,6 +48,7 @@ PYTHON_BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
 SESSION = "import jax, numpy as np"  # the first line of docs/python.md's first snippet
 PIPELINE = "sac.train("  # the training pipeline's snippet holds this
 DEPLOY = "Deployment("  # the deployment loop's snippet holds this
+NUMPY_RUNNER = "measured=measured"  # the numpy runner's snippet (docs/deployment.md) holds this
 ONNX = "ort.InferenceSession("  # the ONNX snippet, run by tests/test_onnx.py
 
 # The tiny SAC of tests/test_sac.py (3 epochs of 32 actor steps x 8 envs), without evaluations.
@@ -78,7 +84,9 @@ def _session() -> list[str]:
 
 def test_every_snippet_is_run():
     blocks = snippets()
-    run = _session() + [b for b in blocks if PIPELINE in b or DEPLOY in b or ONNX in b]
+    run = _session() + [
+        b for b in blocks if any(key in b for key in (PIPELINE, DEPLOY, ONNX, NUMPY_RUNNER))
+    ]
     assert len(blocks) >= 6, f"{PAGES} lost their Python snippets"
     assert sorted(run) == sorted(blocks), "a snippet no test runs"
 
@@ -176,3 +184,45 @@ def test_deployment_snippet():
     _run(code, namespace, "the deployment loop")
     tau = np.asarray(namespace["tau"])
     assert tau.shape == (12,) and np.all(np.isfinite(tau))
+
+
+_WEIGHT_RTOL = 1e-6  # of the arm's weight: float64 arithmetic, the servos at their targets
+
+
+def _still_robot(policy) -> dict:
+    """The names the numpy runner's snippet reads, for a robot standing level and still with its
+    arm still at the joints' references, its servos' targets offset by the arm's gravity torques
+    over their gains (kp (T - q) = h(q, 0): no joint accelerates)."""
+    arm = policy.arm_model
+    obs = np.zeros(policy.input_size + 6)
+    start = policy.s_body.stop
+    obs[start : start + arm.n] = arm.q_ref  # s_arm: q at the reference, qd 0
+    still = arm_dynamics.base_motion(np.eye(3), np.zeros(3), np.zeros(6), np.zeros(3))
+    zero = np.zeros(arm.n)
+    holding = arm_dynamics._joint_torques(  # noqa: SLF001 (h at rest: the test's equilibrium)
+        arm,
+        arm_dynamics._forward(arm, still, arm.q_ref, zero, zero),  # noqa: SLF001
+    )
+    return {
+        "NumpyPolicy": NumpyPolicy,
+        "obs": obs,
+        "yaw": 0.0,
+        "arm_targets": arm.q_ref + holding / arm.kp,
+        "R": np.eye(3),
+        "gyro": np.zeros(3),
+        "qdd_des": np.zeros(6),
+        "com_offset": np.zeros(3),
+    }
+
+
+def test_numpy_runner_snippet():
+    """docs/deployment.md's numpy runner, on the shipped export: still and level, its u is the
+    policy's residual plus the arm's weight (f_z = -m g)."""
+    (code,) = [b for b in snippets() if NUMPY_RUNNER in b]
+    code = code.replace('NumpyPolicy("export/"', f'NumpyPolicy("{SHIPPED}"')
+    namespace = _still_robot(NumpyPolicy(SHIPPED, "regular"))
+    _run(code, namespace, "the numpy runner")
+    policy, u = namespace["policy"], np.asarray(namespace["u"])
+    weight = -np.sum(policy.arm_model.mass) * 9.81  # N, f_z of the arm's weight on the base
+    f_z = u[2] - policy.residual(namespace["obs"])[2]
+    np.testing.assert_allclose(f_z, weight, rtol=_WEIGHT_RTOL)

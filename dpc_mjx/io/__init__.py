@@ -26,6 +26,9 @@ The modules, by role:
                       a robot's computer; it imports nothing else, not even this package)
     arm_dynamics.py   the arms' model wrench with numpy alone, from arm_model_<arm>.json (copy it
                       next to inference.py for an export on the arms' model wrench)
+    onnx_graph.py     an export's encoder and policy as one ONNX graph (`dpc-mjx onnx`); onnx
+                      imported only when a graph is built
+    onnx_arm.py       the arms' model wrench as nodes of that graph, from measured inputs
 """
 
 from dpc_mjx.envs.observations import S_BODY_NAMES

@@ -12,14 +12,30 @@ for the stacks that run ONNX (onnxruntime, TensorRT, C++ and ROS 2 nodes). It co
     x = concat of policy.inputs: s_body = obs[:, s_body], z, u_obs = obs[:, input_size:+6]
     u = u_scale * tanh(pi((x - mean_pi) / std_pi)[:, :action_size])   (+ u_obs where
         action_scaling.base is 'observer'; where it is 'gravity' the robot adds its arms'
-        weight and its torque at their pose, u_gravity, as `NumpyPolicy.u(obs, u_gravity=)`,
-        where it is 'model' their model wrench, u_model, as `NumpyPolicy.u(obs, u_model=)`)
+        weight and its torque at their pose, u_gravity, as `NumpyPolicy.u(obs, u_gravity=)`)
+
+Where action_scaling.base is 'model' and the export records the arm's model
+(encoders.<arm>.arm_model, `arm_model_<arm>.json`), the graph computes the arms' model wrench
+u_model itself (`onnx_arm.model_wrench`, the numbers of `arm_dynamics.servo_motion`) from q, qd
+(the observation's s_arm) and five more inputs, each required, so a runtime refuses to run
+without them (`onnx_arm.MEASURED`; float32, batch-first):
+
+    'targets' (batch, n) rad (m), 'rot' (batch, 3, 3) trunk -> world, 'ang_vel' (batch, 3) rad/s
+    world, 'desired' (batch, 6) [COM m/s^2, angular rad/s^2] world, 'com' (batch, 3) m world
+    output 'u'        u_model + u_scale * a in the policy's frame (a 'yaw' policy: u_model
+                      turned by R_z(-heading of rot)), `NumpyPolicy.u(obs, measured=...)`
+    output 'u_world'  (the output's name + '_world') the same in the world frame: the residual
+                      turned by R_z(heading of rot) plus u_model, `u(obs, heading, measured=...)`
+
+A 'model' export without the arm's model (written before it was recorded), or whose u_model
+reads another estimator, gives the policy's part, `NumpyPolicy.residual(obs)`, and the robot adds
+u_model (policy frame), as `NumpyPolicy.u(obs, u_model=)`; its metadata says so (`u_model`).
 
 E and pi are Gemm (x @ kernel + bias) layers with Relu between, the flax/brax MLPs. Every size,
 the layout and the scaling come from the sidecar (checked by `load`), the weights and the
 normalisers from the msgpack files, in float32 as stored. The opset and the tensor names are the
 sidecar's `onnx` entry (`sidecar.ONNX` for an export written before it was recorded); the
-model's metadata_props name the export, the arm, the frame and the files' sha256.
+model's metadata_props name the export, the arm, the frame, the inputs and the files' sha256.
 
 The graph is built with the `onnx` package's helpers, imported only here, when a graph is built:
 `import dpc_mjx` needs no onnx (`pip install 'dpc-mjx[onnx]'` installs it, and onnxruntime).
@@ -37,12 +53,12 @@ import numpy as np
 from dpc_mjx._version import __version__
 from dpc_mjx.envs.observations import U_OBS_SIZE
 from dpc_mjx.errors import DpcError
-from dpc_mjx.io import sidecar, sidecar_checks
+from dpc_mjx.io import arm_dynamics, onnx_arm, sidecar, sidecar_checks
 from dpc_mjx.io.load import Artefacts, load
 from dpc_mjx.serialization import write_bytes
 
 INSTALL = "pip install 'dpc-mjx[onnx]'"
-_MIN_OPSET = 13  # Slice, Gemm, Concat and the element-wise ops as used here
+_MIN_OPSET = 13  # Slice, Gemm, Concat, element-wise ops; onnx_arm's axes and pads as inputs
 _FRAMES = ("yaw", "world")
 _U_NAMES = ("f_x", "f_y", "f_z", "tau_x", "tau_y", "tau_z")  # u: N, then N·m
 
@@ -62,6 +78,8 @@ class _Layers:
     scale: np.ndarray  # (action_size,) N for f_a, N·m for tau_a per unit action
     frame: str  # of u: 'yaw' or 'world'
     base: str  # u_scale * a added to: 'zero', 'observer' (u_obs, yaw frame), 'gravity', 'model'
+    arm_model: arm_dynamics.ArmModel | None  # base 'model': the graph computes u_model from it
+    u_model: str  # how u_model reaches u (the metadata's `u_model`); '' unless base 'model'
 
 
 def import_onnx() -> Any:
@@ -109,6 +127,8 @@ def _layers(art: Artefacts, arm: str, path: pathlib.Path) -> _Layers:
             f"this policy has {d.action_size} actions and action_scaling.frame {frame!r}; "
             f"{sidecar.REEXPORT}."
         )
+    base = str(scaling.get("base", "zero"))  # checked by `sidecar_checks.check`
+    arm_model, u_model = _arm_model(art.meta, arm, path, d) if base == "model" else (None, "")
     mlp = encoder.params["params"]["mlp"]
     enc_names = [*(f"hidden_{i}" for i in range(len(d.config.hidden))), "out"]
     pol_names = [f"hidden_{i}" for i in range(len(d.policy_hidden) + 1)]
@@ -123,8 +143,29 @@ def _layers(art: Artefacts, arm: str, path: pathlib.Path) -> _Layers:
         action_size=d.action_size,
         scale=np.asarray(scaling["u_scale"], np.float32),
         frame=frame,
-        base=str(scaling.get("base", "zero")),  # checked by `sidecar_checks.check`
+        base=base,
+        arm_model=arm_model,
+        u_model=u_model,
     )
+
+
+def _arm_model(meta: dict, arm: str, path: pathlib.Path, d: sidecar_checks.Declared):
+    """(the `ArmModel` the graph computes u_model from, how) of a 'model' export, or (None, why
+    the robot adds u_model) where it records no arm model or one of another estimator."""
+    if "arm_model" not in meta["encoders"][arm]:
+        return None, (
+            "added by the robot (policy frame): the export records no arm model "
+            f"(encoders.{arm}.arm_model; dpc_mjx.io.add_arm_models records it)"
+        )
+    n_body = d.s_body.stop - d.s_body.start
+    try:
+        model, why = arm_dynamics.from_export(meta, path.parent, arm, d.input_sizes[arm], n_body)
+    except ValueError as e:
+        raise DpcError(f"{e} (the arm model of {arm!r}); {sidecar.REEXPORT}.") from e
+    if model is None:
+        return None, f"added by the robot (policy frame):{why}"
+    inputs = ", ".join(onnx_arm.MEASURED)
+    return model, f"computed in the graph from obs's s_arm and the inputs {inputs}"
 
 
 def _dense(layer) -> tuple[np.ndarray, np.ndarray]:
@@ -176,7 +217,8 @@ class _Graph:
 
 
 def _nodes(g: _Graph, net: _Layers, obs: str, u: str) -> None:
-    """The graph from the observation `obs` (batch, input_size + 6) to `u` (batch, 6)."""
+    """The graph from the observation `obs` (batch, input_size + 6) (and where it computes
+    u_model, `onnx_arm.MEASURED`'s inputs) to `u` (batch, 6) (and `u`_world)."""
     n = net.input_size
     e_in = g.standardise(g.columns(obs, 0, n), net.encoder_norm, "encoder_norm")
     blocks = {
@@ -187,11 +229,28 @@ def _nodes(g: _Graph, net: _Layers, obs: str, u: str) -> None:
     x = g.op("Concat", *(blocks[k]() for k in net.inputs), axis=1)
     logits = g.mlp(g.standardise(x, net.policy_norm, "policy_norm"), net.policy, "policy")
     action = g.op("Tanh", g.columns(logits, 0, net.action_size))
-    if net.base in ("zero", "gravity", "model"):  # the robot adds its arms' wrench to u
-        g.op("Mul", action, g.const("u_scale", net.scale), out=u)
-    else:  # 'observer': u = u_obs + u_scale * a
+    if net.base == "observer":  # u = u_obs + u_scale * a
         residual = g.op("Mul", action, g.const("u_scale", net.scale))
         g.op("Add", blocks["u_obs"](), residual, out=u)
+    elif net.arm_model is not None:  # u = u_model + u_scale * a
+        _with_model(g, net, obs, g.op("Mul", action, g.const("u_scale", net.scale)), u)
+    else:  # 'zero', or the robot adds its arms' wrench to u
+        g.op("Mul", action, g.const("u_scale", net.scale), out=u)
+
+
+def _with_model(g: _Graph, net: _Layers, obs: str, residual: str, u: str) -> None:
+    """`u` = residual + u_model in the policy's frame and `u`_world = the same in the world's,
+    u_model (world) from q, qd = obs's s_arm and the inputs `onnx_arm.MEASURED`."""
+    n, start = net.arm_model.n, net.s_body.stop
+    q, qd = g.columns(obs, start, start + n), g.columns(obs, start + n, start + 2 * n)
+    world = onnx_arm.model_wrench(g, net.arm_model, q, qd, {k: k for k in onnx_arm.MEASURED})
+    if net.frame == "world":
+        g.op("Add", residual, world, out=u)
+        g.op("Identity", u, out=f"{u}_world")
+    else:  # 'yaw': turned by the heading of rot
+        g.op("Add", residual, onnx_arm.heading_turn(g, "rot", world, to_world=False), out=u)
+        turned = onnx_arm.heading_turn(g, "rot", residual, to_world=True)
+        g.op("Add", turned, world, out=f"{u}_world")
 
 
 def onnx_model(export_dir: str | pathlib.Path, arm: str, artefacts: Artefacts | None = None) -> Any:
@@ -210,6 +269,7 @@ def onnx_model(export_dir: str | pathlib.Path, arm: str, artefacts: Artefacts | 
             f"{onnx.defs.onnx_opset_version()}; upgrade onnx or set it to {sidecar.ONNX['opset']}."
         )
     net = _layers(art, arm, path)
+    inputs, outputs = _signature(net, names, path)
     g = _Graph(onnx)
     _nodes(g, net, names["input"], names["output"])
     f32 = onnx.TensorProto.FLOAT
@@ -217,11 +277,12 @@ def onnx_model(export_dir: str | pathlib.Path, arm: str, artefacts: Artefacts | 
     graph = onnx.helper.make_graph(
         g.nodes,
         f"dpc_{arm}",
-        [onnx.helper.make_tensor_value_info(names["input"], f32, ["batch", n_obs])],
-        [onnx.helper.make_tensor_value_info(names["output"], f32, ["batch", net.action_size])],
+        [onnx.helper.make_tensor_value_info(k, f32, ["batch", *s]) for k, s in inputs.items()],
+        [onnx.helper.make_tensor_value_info(k, f32, ["batch", *s]) for k, s in outputs.items()],
         g.initializers,
     )
     opset = [onnx.helper.make_opsetid("", names["opset"])]
+    measured = f" and the tick's {', '.join(onnx_arm.MEASURED)}" if net.arm_model else ""
     model = onnx.helper.make_model(
         graph,
         opset_imports=opset,
@@ -229,16 +290,44 @@ def onnx_model(export_dir: str | pathlib.Path, arm: str, artefacts: Artefacts | 
         producer_name="dpc_mjx",
         producer_version=__version__,
         doc_string=f"u ({net.frame} frame) of arm {arm!r} from its raw env observation "
-        f"[s_body, s_arm, p_arm, u_obs] ({n_obs}); dpc_mjx.io.onnx_graph",
+        f"[s_body, s_arm, p_arm, u_obs] ({n_obs}){measured}; dpc_mjx.io.onnx_graph",
     )
-    onnx.helper.set_model_props(model, _props(art.meta, arm, net))
+    onnx.helper.set_model_props(model, _props(art.meta, arm, net, inputs, outputs))
     onnx.checker.check_model(model, full_check=True)
     return model
 
 
-def _props(meta: dict, arm: str, net: _Layers) -> dict[str, str]:
+def _signature(net: _Layers, names: dict, path: pathlib.Path) -> tuple[dict, dict]:
+    """({input name: shape after the batch axis}, {output name: shape}) of the graph; `DpcError`
+    where the sidecar's names take one of the arm model's inputs."""
+    inputs = {names["input"]: [net.input_size + U_OBS_SIZE]}
+    outputs = {names["output"]: [net.action_size]}
+    if net.arm_model is None:
+        return inputs, outputs
+    measured = {
+        k: [net.arm_model.n if x == "n" else x for x in shape]
+        for k, (shape, _) in onnx_arm.MEASURED.items()
+    }
+    world = f"{names['output']}_world"
+    outputs[world] = [net.action_size]
+    if (set(measured) | {world}) & {names["input"], names["output"]}:
+        raise DpcError(
+            f"{path}: onnx.input and onnx.output {names['input']!r}, {names['output']!r} take "
+            f"a name of the arm model's inputs {list(measured)} (or its output "
+            f"'{names['output']}_world'); rename them in the sidecar's onnx entry."
+        )
+    return inputs | measured, outputs
+
+
+def _props(meta: dict, arm: str, net: _Layers, inputs: dict, outputs: dict) -> dict[str, str]:
     """The model's metadata_props: which export and arm, and how to read u."""
+    words = {k: s for k, (_, s) in onnx_arm.MEASURED.items()}
+    words[next(iter(inputs))] = "the raw env observation [s_body, s_arm, p_arm, u_obs]"
+    extra = {"u_model": net.u_model} if net.base == "model" else {}
     return {
+        **extra,
+        "inputs": json.dumps({k: [s, words.get(k, "")] for k, s in inputs.items()}),
+        "outputs": json.dumps(outputs),
         "arm": arm,
         "frame": net.frame,
         "base": net.base,
