@@ -63,7 +63,8 @@ def main() -> None:
     for stage in STAGES:
         paper = statistics.median(t[stage] for t in times["paper"])
         model = statistics.median(t[stage] for t in times["model"])
-        ratio = statistics.median(m[stage] / q[stage] for m, q in zip(*times.values(), strict=True))
+        rounds = zip(times["paper"], times["model"], strict=True)
+        ratio = statistics.median(m[stage] / q[stage] for q, m in rounds)
         print(f"| {stage} | {paper:.1f} | {model:.1f} | {ratio:.2f} |")
 
 
