@@ -234,13 +234,9 @@ _UNMODELLED_TOL_F = 0.02  # N, per axis
 _PAYLOAD_KG = 0.3
 
 
-@pytest.mark.parametrize("payload", [0.0, _PAYLOAD_KG])
-def test_the_unmodelled_wrench_is_the_force_on_the_gripper(payload):
-    """`adapter.data.unmodelled_u` (`Dataset.u_unmodelled`): zero with no push and no payload,
-    the payload's weight (a force m g at the gripper) with one, while the arm reaches and the
-    robot trots; its torque that force's moment about the base's COM. With no push it is
-    `payload_u` (`Dataset.u_payload`, the 'model' target)."""
-    env = dpc_mjx.make(
+def _unpushed(payload: float):
+    """The reaching env on `regular` under MBC with no push and a payload of `payload` kg."""
+    return dpc_mjx.make(
         DEFAULT_TASK,
         arm="regular",
         engine=ENGINE,
@@ -248,6 +244,15 @@ def test_the_unmodelled_wrench_is_the_force_on_the_gripper(payload):
         push_force=(0.0, 0.0),
         payload_mass=(payload, payload),
     )
+
+
+@pytest.mark.parametrize("payload", [0.0, _PAYLOAD_KG])
+def test_the_unmodelled_wrench_is_the_force_on_the_gripper(payload):
+    """`adapter.data.unmodelled_u` (`Dataset.u_unmodelled`): zero with no push and no payload,
+    the payload's weight (a force m g at the gripper) with one, while the arm reaches and the
+    robot trots; its torque that force's moment about the base's COM. With no push it is
+    `payload_u` (`Dataset.u_payload`, the 'model' target)."""
+    env = _unpushed(payload)
     states = _states(env, np.zeros(6))
     for state in states:
         d = state.pipeline_state
@@ -270,14 +275,7 @@ def test_what_the_mount_feels_beyond_the_servos_motion_is_zero_on_a_free_arm():
     payload it is not zero, and smaller than the payload's weight (the servos hold the load, and
     the model of their motion sees their effort)."""
     for payload in (0.0, _PAYLOAD_KG):
-        env = dpc_mjx.make(
-            DEFAULT_TASK,
-            arm="regular",
-            engine=ENGINE,
-            controller="mbc",
-            push_force=(0.0, 0.0),
-            payload_mass=(payload, payload),
-        )
+        env = _unpushed(payload)
         for state in _states(env, np.zeros(6)):
             d = state.pipeline_state
             assert not np.any(np.asarray(d.qfrc_constraint)[:, env.lay.arm_dof])  # a free arm
