@@ -19,7 +19,7 @@ from helpers import fast_jit, model_bytes
 from dpc_mjx import DpcError, assets, make
 from dpc_mjx.control.base_scaling import model_scale
 from dpc_mjx.control.controller import make_controller
-from dpc_mjx.envs.registry import WEIGHT_SCALED, get_config
+from dpc_mjx.envs.registry import RESIDUAL_BOUNDS, WEIGHT_SCALED, get_config
 from dpc_mjx.envs.rollout import run_episodes
 from dpc_mjx.io.inference import NumpyPolicy
 from dpc_mjx.io.shipped import SHIPPED, export_cells, shipped_for
@@ -116,6 +116,21 @@ def test_the_tasks_pushes_payloads_and_u_bounds_follow_the_bases_weight():
     assert make("reaching", base="b1").config.u_scale == b1.u_scale  # make uses the same rule
 
 
+def test_a_residual_of_the_arms_model_is_bounded_to_small_loads_scaled_by_the_bases_weight():
+    """u_base='model': u's bounds are `RESIDUAL_BOUNDS` (the A1's), scaled like the rest on
+    another base; bounds given are used as given, each on its own."""
+    m = 55.689 / 13.741  # the files' trunk + legs, B1 over A1
+    want = RESIDUAL_BOUNDS["model"]
+    for base, scale in (("a1", 1.0), ("b1", m)):
+        got = get_config("reaching", base=base, u_base="model")
+        for name, a1_value in want.items():
+            np.testing.assert_allclose(getattr(got, name), np.asarray(a1_value) * scale, atol=0.01)
+    paper = get_config("reaching")  # the paper's form: u is the whole wrench
+    assert paper.max_force == (15.0, 15.0, 60.0) and paper.max_torque == (12.0, 12.0, 3.0)
+    given = get_config("reaching", u_base="model", max_force=(15.0, 15.0, 60.0))
+    assert given.max_force == (15.0, 15.0, 60.0) and given.max_torque == want["max_torque"]
+
+
 def test_an_arm_mount_moves_to_the_same_place_of_another_trunk():
     go2 = read_base("go2")  # its box comes from its collision mesh, off the trunk's origin
     mount = VARIANTS["regular"].arms[0].mount
@@ -152,7 +167,7 @@ def test_the_shipped_export_of_a_base_is_its_own(base, arm):
     assert export != SHIPPED and shipped_for(None) == SHIPPED
     artefacts, arms, options = export_cells(export, None, ["dpc"], "reaching", {"base": base})
     assert options["base"] == base and [arm_name(a) for a in arms] == [arm]
-    scaled = get_config("reaching", base=base)  # trained with the base's weight-scaled bounds
+    scaled = get_config("reaching", base=base, u_base="model")  # its residual bounds, scaled
     np.testing.assert_allclose(artefacts.meta["action_scaling"]["u_scale"], scaled.u_scale)
     runner = NumpyPolicy(export, arm)  # the numpy runner: a finite u within its bounds
     assert runner.base == "model"  # added to the arms' model wrench, from its arm-model file

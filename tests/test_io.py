@@ -789,8 +789,8 @@ SIDECAR_DISAGREES = {  # one field of dpc.json against another (or this library)
         ["dpc.json", "u_scale has 5 entries", "policy.action_size is 6", "re-export"],
     ),
     "u_scale vs env_config bounds": (
-        _set("action_scaling", "u_scale", value=[16.0, 15.0, 60.0, 12.0, 12.0, 3.0]),
-        ["dpc.json", "u_scale is [16.0,", "max_torque", "gives [15.0,", "re-export"],
+        _set("action_scaling", "u_scale", value=[16.0, 6.0, 6.0, 3.0, 3.0, 3.0]),
+        ["dpc.json", "u_scale is [16.0,", "max_torque", "gives [6.0,", "re-export"],
     ),
     "arm_model entry vs its form": (
         _set("encoders", "regular", "arm_model", value={"file": 3}),

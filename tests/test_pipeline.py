@@ -7,7 +7,7 @@ import pytest
 
 from dpc_mjx import DpcError, io
 from dpc_mjx.envs import DEFAULT_TASK
-from dpc_mjx.envs.registry import task_name
+from dpc_mjx.envs.registry import get_config, task_name
 from dpc_mjx.io.serialization import jsonable
 from dpc_mjx.run import cli, pipeline
 from dpc_mjx.run import eval as run_eval
@@ -125,6 +125,11 @@ def test_shipped_artefacts_load_and_are_the_default_recipe():
     env = art.meta["env_config"]  # the default reaching task: yaw-frame u, the robot's sensors
     assert (env["u_frame"], env["sensor_noise"], env["sensor_delay"]) == ("yaw", 1.0, 1)
     assert env["u_base"] == defaults.env_overrides["u_base"] == "model"  # on the arms' model
+    trained = get_config(DEFAULT_TASK, **defaults.env_overrides)  # its residual's bounds
+    assert (tuple(env["max_force"]), tuple(env["max_torque"])) == (
+        trained.max_force,
+        trained.max_torque,
+    )
 
 
 def test_shipped_paper_export_is_the_paper_recipe_and_its_actor_sees_no_privileged_value():

@@ -124,7 +124,9 @@ class EnvConfig:
     # (per axis x, y, z of `u_frame`; about the base's COM). A number applies to all three axes.
     # The defaults bound the oracle's u on the reaching task with margin (its std there: f 2.6,
     # 2.6, 19 N around a mean f_z of -10 N; tau 3.8, 4.0, 0.44 N·m), so exploration does not
-    # throw the robot around with forces no arm exerts. The oracle's own u is not clipped.
+    # throw the robot around with forces no arm exerts. The oracle's own u is not clipped. With
+    # u_base 'model', `make` / `get_config` bound the residual to small loads instead
+    # (`envs.registry.RESIDUAL_BOUNDS`: 6 N, 3 N·m on the A1).
     #
     # The frame of the policy's u: 'yaw' (heading-aligned, z up; turned to the world frame, the
     # controller's, at every tick), or 'world' (the exports written before this option existed). The

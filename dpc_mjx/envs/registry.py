@@ -7,7 +7,8 @@ task's module in `dpc_mjx.envs.tasks` (the class declares `TASK`, `DEFAULT_ARM`,
 and `scene_spec`). `make` checks the name, the arm (known variant, one the task can use, one the
 base can hold up) and the overrides, raising `DpcError` before anything is built or compiled, then
 builds the env; `scene_spec` / `build_scene` give a task's scene alone. On a base other than the
-A1, `get_config` scales the task's pushes, payloads and u's bounds by its weight (`WEIGHT_SCALED`).
+A1, `get_config` scales the task's pushes, payloads and u's bounds by its weight (`WEIGHT_SCALED`);
+u's bounds are those of what the policy's u is added to (`RESIDUAL_BOUNDS`).
 
     task            default arm   scene (on the A1; on another base the objects move with the
                                   arm's mount, `envs.tasks.scripts.mount_offset`)
@@ -80,11 +81,21 @@ def known_tasks() -> list[str]:
 # given (N, kg, N·m).
 WEIGHT_SCALED = ("push_force", "payload_mass", "max_force", "max_torque")
 
+# u's bounds (N, N·m per axis x, y, z; the A1's, scaled as above) where the policy's u is a
+# residual of the arms' model (`EnvConfig.u_base`): small loads only, the payload and the model's
+# error, so that a push saturates it and is left to the balance QP's feedback
+# (docs/results-arm-model.md, "A residual bounded to small loads"). Elsewhere u is the whole
+# wrench and `EnvConfig`'s bounds apply. Bounds given as overrides are used as given.
+RESIDUAL_BOUNDS = {"model": {"max_force": (6.0, 6.0, 6.0), "max_torque": (3.0, 3.0, 3.0)}}
+
 
 def get_config(name: str, **overrides: Any) -> EnvConfig:
-    """The task's default config with `overrides`, validated; on a base other than the A1, its
-    `WEIGHT_SCALED` defaults scaled by the base's mass ratio."""
+    """The task's default config with `overrides`, validated; u's bounds those of its `u_base`
+    (`RESIDUAL_BOUNDS`) unless given; on a base other than the A1, its `WEIGHT_SCALED` defaults
+    scaled by the base's mass ratio."""
     config = _task(name).default_config().replace(**overrides)
+    residual = RESIDUAL_BOUNDS.get(config.u_base, {})
+    config = config.replace(**{k: v for k, v in residual.items() if k not in overrides})
     m = base_mass_ratio(config.base)
     if m == 1.0:
         return config
