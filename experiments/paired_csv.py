@@ -1,6 +1,7 @@
 """Paired comparisons from saved per-episode CSVs (`dpc-mjx eval --csv`, `eval_episodes.csv`).
 
     python experiments/paired_csv.py A.csv:dpc B.csv:mbc B.csv:observer ... [--by-arm]
+        [--measure ball_on_target ...]
 
 The first `CSV:CONTROLLER` is compared with each of the others on the episodes they share,
 matched by (arm, seed, episode); episodes must be the same set (same `--seed` and `--episodes`),
@@ -9,6 +10,8 @@ fall-rate difference with paired 95% intervals, discordant falls and the exact M
 to pair an export evaluated later with controllers already evaluated on the same episodes (the
 env is deterministic given the seed: re-running one of them reproduces its rows exactly).
 `--by-arm`: one row per arm of the CSVs (the episodes of that arm) instead of one over all.
+`--measure COLUMN ...`: also each column's mean difference (a task's measure, e.g.
+`ball_on_target`, `pos_rmse`; any numeric column of the CSV) with its paired 95% interval.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ import argparse
 
 from dpc_mjx.errors import DpcError
 from dpc_mjx.run.eval import PAIRED_HEADER, paired_row
-from dpc_mjx.run.report import pair, read_controller
+from dpc_mjx.run.report import pair, paired_text, read_controller
 
 
 def main() -> None:
@@ -25,6 +28,7 @@ def main() -> None:
     ap.add_argument("first", help="CSV:CONTROLLER, compared with each of the others")
     ap.add_argument("others", nargs="+", help="CSV:CONTROLLER")
     ap.add_argument("--by-arm", action="store_true", help="one row per arm")
+    ap.add_argument("--measure", nargs="+", default=[], help="CSV columns to pair as well")
     args = ap.parse_args()
     a = read_controller(args.first)
     arms = sorted({key[0] for key in a}) if args.by_arm else [None]
@@ -36,6 +40,16 @@ def main() -> None:
             where = "" if arm is None else f"{arm}: "
             label = f"{where}{args.first} - {spec} ({len(first[0])} episodes)"
             print(paired_row(label, first, second))
+    for column in args.measure:
+        print(f"\n| {column}: first - other (same episodes) | difference [95% CI] |\n|---|---|")
+        for spec in args.others:
+            columns = (column,)
+            first, second = pair(
+                read_controller(args.first, columns),
+                read_controller(spec, columns),
+                (args.first, spec),
+            )
+            print(f"| {args.first} - {spec} | {paired_text(first[0], second[0])} |")
 
 
 def _of_arm(episodes: dict, arm: str | None) -> dict:

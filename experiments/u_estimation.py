@@ -3,6 +3,7 @@ figure "output parameters under a sudden force".
 
     python experiments/u_estimation.py [--export DIR] [--other DIR] [--other-label NAME]
         [--arm regular] [--controller dpc] [--episodes 32] [--seed 5000] [--engine auto]
+        [--own-loop feedforward_observer ...]
 
 Held-out rollouts: `--episodes` episodes of the reaching task with `--arm` (the export's env
 options, sensors as configured there) under `--controller` (default the export's own DPC; the
@@ -22,6 +23,10 @@ y left, z up; torques about the base's COM):
                `--other-label`)
     other, own loop   `--other`'s u on rollouts under its own control (same seeds; with
                `--controller dpc` only)
+    C, own loop   the u a classical controller C of `--own-loop` (observer, feedforward,
+               feedforward_observer) gives its balance QP, on rollouts under C itself (same
+               seeds): for feedforward_observer, the model wrench plus its observer's estimate
+               of what the model leaves, which no other controller's rollout computes
 
 A learned estimate is only as good as the states it is asked on: the first rows share the
 states of `--controller` (the figure needs one episode), the last shows `--other` where it acts.
@@ -42,6 +47,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from dpc_mjx import io, stats
+from dpc_mjx.controllers import Controller
 from dpc_mjx.envs import rollout
 from dpc_mjx.envs.observations import PRIVILEGED, U_OBS_SIZE
 from dpc_mjx.envs.registry import DEFAULT_TASK, make
@@ -70,6 +76,7 @@ def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
             "u_oracle": privileged[:, PRIVILEGED["u_oracle"]],
             "u_gravity": jax.vmap(env.arm_gravity)(before.pipeline_state),  # (B, 6) world
             "u_model": before.info["ctrl"].arm.wrench,  # (B, 6) world, the last tick's
+            "u_observer": before.info["ctrl"].observer.estimate,  # (B, 6) world, this controller's
             "push": privileged[:, PRIVILEGED["ee_force"]],
             "done": after.done,
         }
@@ -85,7 +92,16 @@ def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
     out["u_scale"] = np.asarray(env.config.u_scale)
     out["gravity"] = np.asarray(wrench_to_yaw_frame(out["u_gravity"], out["yaw"]))
     out["model"] = np.asarray(wrench_to_yaw_frame(out["u_model"], out["yaw"]))
+    out["observer"] = np.asarray(wrench_to_yaw_frame(out["u_observer"], out["yaw"]))
+    out["truth"] = np.asarray(wrench_to_yaw_frame(out["u_oracle"], out["yaw"]))
     return out
+
+
+def classical_u(rec: dict, controller: str) -> np.ndarray:
+    """(steps, episodes, 6) yaw frame: the u `controller` gave its balance QP, from its own
+    rollout's records (`Controller.adds`: the observer's estimate, the model wrench, or both)."""
+    add_estimate, add_model = Controller(controller).adds()
+    return add_model * rec["model"] + add_estimate * rec["observer"]
 
 
 def estimates(rec: dict, export: pathlib.Path, arm: str) -> np.ndarray:
@@ -177,9 +193,16 @@ def main() -> None:
     ap.add_argument("--controller", default="dpc", help="whose states: dpc, oracle, ...")
     ap.add_argument("--engine", default="auto", help="auto, mjx or native")
     ap.add_argument("--figure", default="docs/figures/u_estimation.png")
+    ap.add_argument(
+        "--own-loop",
+        nargs="*",
+        default=[],
+        choices=["observer", "feedforward", "feedforward_observer"],
+        help="classical controllers whose u is also measured on rollouts under their own control",
+    )
     args = ap.parse_args()
     rec = rollouts(pathlib.Path(args.export), args)
-    truth = np.asarray(wrench_to_yaw_frame(rec["u_oracle"], rec["yaw"]))
+    truth = rec["truth"]
     u_obs = rec["obs"][..., -U_OBS_SIZE:]  # the observation's last entries
     series = {"observer": u_obs, "gravity": rec["gravity"], "feedforward": rec["model"]}
     series["dpc"] = estimates(rec, args.export, args.arm)
@@ -191,6 +214,11 @@ def main() -> None:
         own_truth = np.asarray(wrench_to_yaw_frame(own["u_oracle"], own["yaw"]))
         own_u = estimates(own, args.other, args.arm)
         rows[f"{args.other_label}, own loop"] = (own_u[own["alive"]], own_truth[own["alive"]])
+    for name in args.own_loop:
+        own_args = argparse.Namespace(**{**vars(args), "controller": name})
+        own = rollouts(pathlib.Path(args.export), own_args)
+        u = classical_u(own, name)
+        rows[f"{name}, own loop"] = (u[own["alive"]], own["truth"][own["alive"]])
     alive = rec["alive"]
     rows = {name: (u[alive], truth[alive]) for name, u in series.items()} | rows
     print(

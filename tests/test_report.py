@@ -85,6 +85,12 @@ def test_two_controllers_pair_on_the_same_episodes(csv_path):
         read_controller(str(csv_path))
     with pytest.raises(DpcError, match="no rows of controller 'oracle'"):
         read_controller(f"{csv_path}:oracle")
+    # a task's measure, paired the same way (`experiments/paired_csv.py --measure`)
+    first, second = pair(*(read_controller(f"{csv_path}:{c}", ("box_dx",)) for c in ("dpc", "mbc")))
+    np.testing.assert_array_equal(first[0], np.linspace(0.0, 0.3, 5))
+    assert len(first) == len(second) == 1
+    with pytest.raises(DpcError, match=r"no column \['ball_on_target'\]"):
+        read_controller(f"{csv_path}:dpc", ("ball_on_target",))
 
 
 def test_a_csv_without_the_key_columns_is_refused(tmp_path):

@@ -120,31 +120,37 @@ def read_cells(path: str | pathlib.Path) -> dict[str, dict[str, np.ndarray]]:
     return out
 
 
-def read_controller(spec: str) -> dict[tuple[str, str, str], tuple[float, float]]:
+def read_controller(
+    spec: str, columns: tuple[str, ...] = ("fell", "return")
+) -> dict[tuple[str, str, str], tuple[float, ...]]:
     """{(arm, seed, episode): (fell, return)} of one controller in one CSV, `spec` =
-    `PATH:CONTROLLER` (e.g. `runs/eval/x.csv:dpc`)."""
+    `PATH:CONTROLLER` (e.g. `runs/eval/x.csv:dpc`); other numeric `columns` (a task's measure,
+    e.g. ("ball_on_target",)) give their values in that order."""
     path, sep, controller = spec.rpartition(":")
     if not sep:
         raise DpcError(f"Give CSV:CONTROLLER, got {spec!r} (e.g. runs/eval/x.csv:dpc).")
     rows = read_episodes(path, controller)
     if not rows:
         raise DpcError(f"{path} has no rows of controller {controller!r}.")
-    return {
-        (r["arm"], r["seed"], r["episode"]): (float(r["fell"]), float(r["return"])) for r in rows
-    }
+    missing = [c for c in columns if c not in rows[0]]
+    if missing:
+        raise DpcError(f"{path} has no column {missing}; its columns are {sorted(rows[0])}.")
+    return {(r["arm"], r["seed"], r["episode"]): tuple(float(r[c]) for c in columns) for r in rows}
 
 
 def pair(first: dict, second: dict, names: tuple[str, str] = ("first", "second")) -> tuple:
     """Two controllers' episodes (`read_controller`) on the same episodes, for
-    `run.eval.paired_row`: ((fell, return), (fell, return)), each (episodes,), episodes in the
-    order of their sorted keys; `names` label the error when the episodes differ."""
+    `run.eval.paired_row`: ((fell, return), (fell, return)), or the columns read, each
+    (episodes,), episodes in the order of their sorted keys; `names` label the error when the
+    episodes differ."""
     if set(first) != set(second):
         raise DpcError(
             f"{names[0]} and {names[1]} hold different episodes; pair the same ones (same --seed "
             "and --episodes)."
         )
     keys = sorted(first)
-    a, b = ([np.array([x[k][i] for k in keys]) for i in (0, 1)] for x in (first, second))
+    width = len(first[keys[0]]) if keys else 0
+    a, b = ([np.array([x[k][i] for k in keys]) for i in range(width)] for x in (first, second))
     return tuple(a), tuple(b)
 
 
