@@ -204,6 +204,8 @@ def test_the_graph_refuses_to_run_without_a_measured_input(sessions):
             sessions["double"].run(None, feed)
     with pytest.raises(ValueError, match="measured="):  # as the numpy runner refuses
         policy.u(obs)
+    shapes = json.loads((SHIPPED / sidecar.SIDECAR).read_text())["onnx"]["shapes"]
+    assert all(f"{key} (batch" in shapes for key in onnx_arm.MEASURED)  # the sidecar names them
 
 
 def test_the_graph_passes_the_full_check_and_its_metadata_names_the_inputs():

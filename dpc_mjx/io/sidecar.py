@@ -60,6 +60,17 @@ REEXPORT = "re-export the artefacts with dpc_mjx.io.export"
 # The ONNX graph of an arm's encoder and the policy (`onnx_graph.py`): its opset, its input (the
 # raw env observation, float32 (batch, input_size + 6)) and its output (u, float32 (batch, 6))
 ONNX = {"opset": 17, "input": "obs", "output": "u"}
+ONNX_SHAPES = (  # the graph's tensors, as the sidecar's `onnx.shapes` describes them
+    "obs float32 (batch, encoders.<arm>.input_size + 6): the raw env observation; u float32 "
+    "(batch, 6): [f_a (N), tau_a (N m)], action_scaling.frame"
+)
+ONNX_MODEL_SHAPES = (  # and, on the arms' model (action_scaling.base 'model'), `onnx_arm.MEASURED`
+    "; with the arms' model (action_scaling.base 'model') five more inputs, each required: "
+    "targets (batch, n) rad (m), the arm servo targets; rot (batch, 3, 3) trunk -> world; "
+    "ang_vel (batch, 3) rad/s, world; desired (batch, 6) the balance QP's desired [COM m/s^2, "
+    "angular rad/s^2], world; com (batch, 3) m, the base's COM minus the trunk's origin, world; "
+    "u is then u_model + the policy's u, and u_world float32 (batch, 6) the same in the world frame"
+)
 _ARM_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _REQUIRED = (
     *("format_version", "library_version", "adapter_config", "policy", "decoder", "encoders"),
@@ -170,8 +181,7 @@ def build(
         "action_scaling": action_scaling(scaling),
         "onnx": {
             **ONNX,
-            "shapes": "obs float32 (batch, encoders.<arm>.input_size + 6): the raw env "
-            "observation; u float32 (batch, 6): [f_a (N), tau_a (N m)], action_scaling.frame",
+            "shapes": ONNX_SHAPES + (ONNX_MODEL_SHAPES if scaling.u_base == "model" else ""),
             "command": "dpc-mjx onnx --export DIR --arm ARM --out policy.onnx",
         },
         "env_config": dataclasses.asdict(env_config) if env_config is not None else None,
