@@ -46,6 +46,7 @@ from dpc_mjx.adapter.networks import DRP_SIZE, AdapterConfig
 from dpc_mjx.envs.config import EnvConfig
 from dpc_mjx.envs.observations import S_BODY_NAMES, U_OBS_NAMES, ObsLayout
 from dpc_mjx.errors import DpcError
+from dpc_mjx.io import onnx_arm
 from dpc_mjx.policy.policy import observation_size
 from dpc_mjx.robots.spec_json import ArmLike, arm_to_json
 from dpc_mjx.serialization import read_json
@@ -64,12 +65,14 @@ ONNX_SHAPES = (  # the graph's tensors, as the sidecar's `onnx.shapes` describes
     "obs float32 (batch, encoders.<arm>.input_size + 6): the raw env observation; u float32 "
     "(batch, 6): [f_a (N), tau_a (N m)], action_scaling.frame"
 )
-ONNX_MODEL_SHAPES = (  # and, on the arms' model (action_scaling.base 'model'), `onnx_arm.MEASURED`
+ONNX_MODEL_SHAPES = (  # and, on the arms' model (action_scaling.base 'model'), its inputs
     "; with the arms' model (action_scaling.base 'model') five more inputs, each required: "
-    "targets (batch, n) rad (m), the arm servo targets; rot (batch, 3, 3) trunk -> world; "
-    "ang_vel (batch, 3) rad/s, world; desired (batch, 6) the balance QP's desired [COM m/s^2, "
-    "angular rad/s^2], world; com (batch, 3) m, the base's COM minus the trunk's origin, world; "
-    "u is then u_model + the policy's u, and u_world float32 (batch, 6) the same in the world frame"
+    + "; ".join(
+        f"{key} (batch, {', '.join(map(str, shape))}): {words}"
+        for key, (shape, words) in onnx_arm.MEASURED.items()
+    )
+    + "; u is then u_model + the policy's u, and u_world float32 (batch, 6) the same in the world "
+    "frame"
 )
 _ARM_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _REQUIRED = (
