@@ -40,16 +40,17 @@ def main() -> None:
             where = "" if arm is None else f"{arm}: "
             label = f"{where}{args.first} - {spec} ({len(first[0])} episodes)"
             print(paired_row(label, first, second))
-    for column in args.measure:
+    columns = tuple(args.measure)  # each CSV read once for all of them
+    if columns:
+        measured = read_controller(args.first, columns)
+        pairs = {
+            spec: pair(measured, read_controller(spec, columns), (args.first, spec))
+            for spec in args.others
+        }
+    for i, column in enumerate(columns):
         print(f"\n| {column}: first - other (same episodes) | difference [95% CI] |\n|---|---|")
-        for spec in args.others:
-            columns = (column,)
-            first, second = pair(
-                read_controller(args.first, columns),
-                read_controller(spec, columns),
-                (args.first, spec),
-            )
-            print(f"| {args.first} - {spec} | {paired_text(first[0], second[0])} |")
+        for spec, (first, second) in pairs.items():
+            print(f"| {args.first} - {spec} | {paired_text(first[i], second[i])} |")
 
 
 def _of_arm(episodes: dict, arm: str | None) -> dict:

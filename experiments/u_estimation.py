@@ -95,6 +95,7 @@ def rollouts(export: pathlib.Path, args: argparse.Namespace) -> dict:
     out["model"] = np.asarray(wrench_to_yaw_frame(out["u_model"], out["yaw"]))
     out["observer"] = np.asarray(wrench_to_yaw_frame(out["u_observer"], out["yaw"]))
     out["truth"] = np.asarray(wrench_to_yaw_frame(out["u_oracle"], out["yaw"]))
+    out["u_base"] = options.get("u_base", "zero")  # what the export's policy adds its u to
     return out
 
 
@@ -235,8 +236,7 @@ def main() -> None:
         f"episodes (seeds from {args.seed})"
     )
     accuracy_table(rows)
-    u_base = env_overrides(io.load(args.export)).get("u_base", "zero")
-    target = (truth - policy_base(rec, u_base))[alive]  # what the export's policy must give
+    target = (truth - policy_base(rec, rec["u_base"]))[alive]  # what the export's policy must give
     bias_table({name: rows[name] for name in series}, truth[alive], target, rec["u_scale"])
     figure(rec, series, truth, pathlib.Path(args.figure))
 
